@@ -1,0 +1,167 @@
+"""Scene -> renderer-neutral geometry: triangle meshes, emitters and the exposure.
+
+Both renderers (Mitsuba and POV-Ray) consume this, so they see the same triangles.
+Everything is expressed in *chip units*: the chip spans [-1, 1] in x (range) and y
+(along-track), centred at the origin, z up; one chip unit is chip_size / 2 metres.
+Working in chip units keeps the camera fixed for every scene, so a preset whose chip
+size varies still reuses one compiled kernel.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from sasmi.errors import SasmiError
+from sasmi.scene import Scene, Target
+from sasmi.seafloor import height_array, height_at
+
+CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (kernel reuse)
+SPHERE_SUBDIVISIONS = 3
+
+
+@dataclass(frozen=True)
+class TriangleMesh:
+    vertices: np.ndarray  # (V, 3) float32, chip units
+    faces: np.ndarray  # (F, 3) uint32, counter-clockwise seen from outside
+    albedo: float
+
+
+@dataclass(frozen=True)
+class Geometry:
+    size: int  # image width = height in pixels
+    metres_per_unit: float  # chip_size / 2
+    floor: TriangleMesh
+    targets: tuple[TriangleMesh, ...]
+    emitter_positions: np.ndarray  # (N, 3) chip units
+    aim: np.ndarray  # (3,) every spot is aimed at the chip centre
+    cone_angle: float  # deg, cutoff half-angle
+    beam_width: float  # deg, where the falloff starts
+    emitter_intensity: float  # radiant intensity per emitter, exposure folded in
+
+    @property
+    def structure(self) -> tuple:
+        """What must stay equal for a compiled renderer to be updated in place."""
+        return (self.size, len(self.floor.vertices), len(self.emitter_positions),
+                tuple((len(t.vertices), len(t.faces)) for t in self.targets))
+
+
+def grid_faces(n: int) -> np.ndarray:
+    """Two up-facing triangles per cell of an (n+1) x (n+1) vertex grid, row-major."""
+    r, c = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    v00 = (r * (n + 1) + c).ravel()
+    v01, v10 = v00 + 1, v00 + (n + 1)
+    v11 = v10 + 1
+    return np.concatenate([np.stack([v00, v01, v11], 1), np.stack([v00, v11, v10], 1)]).astype(np.uint32)
+
+
+def floor_mesh(heights_m: np.ndarray, chip_size: float, albedo: float) -> TriangleMesh:
+    n = heights_m.shape[0] - 1
+    scale = 2.0 / chip_size
+    coords = np.linspace(-1.0, 1.0, n + 1)
+    x, y = np.meshgrid(coords, coords)
+    vertices = np.stack([x, y, heights_m * scale], -1).reshape(-1, 3).astype(np.float32)
+    return TriangleMesh(vertices, _cached_grid_faces(n), albedo)
+
+
+@lru_cache(maxsize=4)
+def _cached_grid_faces(n: int) -> np.ndarray:
+    faces = grid_faces(n)
+    faces.setflags(write=False)
+    return faces
+
+
+@lru_cache(maxsize=32)
+def _load_mesh_file(path: str) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except FileNotFoundError:
+        raise SasmiError(f"{path}: mesh file not found") from None
+    except Exception as e:  # trimesh raises many types for unreadable files
+        raise SasmiError(f"{path}: cannot read mesh ({e})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise SasmiError(f"{path}: no triangles found")
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.uint32)
+
+
+def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """Target mesh in metres, axis along +x for lying shapes, lowest point at z = 0."""
+    import trimesh
+
+    if t.shape == "cylinder":
+        m = trimesh.creation.cylinder(radius=t.radius, height=t.length, sections=CYLINDER_SECTIONS)
+        m.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
+        v, f = m.vertices, m.faces
+    elif t.shape == "sphere":
+        m = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=t.radius)
+        v, f = m.vertices, m.faces
+    elif t.shape == "cone":
+        m = trimesh.creation.cylinder(radius=t.radius, height=t.length, sections=CYLINDER_SECTIONS)
+        v = m.vertices.copy()
+        top = v[:, 2] > 0
+        v[top, :2] *= t.radius_top / t.radius  # frustum: shrink the top ring
+        f = m.faces
+    else:
+        try:
+            v, f = _load_mesh_file(t.mesh)
+        except SasmiError as e:
+            raise SasmiError(f"{where}.mesh: {e}") from None
+        v = v * t.scale
+    v = np.asarray(v, dtype=np.float64)
+    v = v - [0.0, 0.0, v[:, 2].min()]
+    return v, np.asarray(f, dtype=np.uint32)
+
+
+def target_mesh(t: Target, heights_m: np.ndarray, chip_size: float, where: str) -> TriangleMesh:
+    v, f = _unit_shape(t, where)
+    height = v[:, 2].max()
+    if t.burial >= height:
+        raise SasmiError(f"{where}.burial: {t.burial:g} m buries the whole target (height {height:g} m)")
+    yaw = math.radians(t.yaw)
+    rot = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
+    ground = height_at(heights_m, chip_size, t.x, t.y)
+    v = v @ rot.T + [t.x, t.y, ground - t.burial]
+    return TriangleMesh((v * (2.0 / chip_size)).astype(np.float32), f, t.albedo)
+
+
+def emitter_positions(scene: Scene) -> np.ndarray:
+    """Emitters along the track (ground range 0) at altitude max_range / 10, in chip units."""
+    s = scene.sonar
+    scale = 2.0 / s.chip_size
+    track_x = -(s.near_range + s.chip_size / 2)
+    ys = np.linspace(-s.track_length / 2, s.track_length / 2, s.emitters) if s.emitters > 1 else np.zeros(1)
+    return np.stack([np.full_like(ys, track_x), ys, np.full_like(ys, s.altitude)], 1) * scale
+
+
+def exposure(positions: np.ndarray) -> float:
+    """1 / radiance of a flat albedo-1 Lambertian floor at the chip centre lit by unit spots.
+
+    Irradiance from each spot aimed at the centre is I cos(theta) / d^2 (no falloff on
+    the beam axis); Lambertian radiance is albedo / pi times the irradiance.
+    """
+    d2 = (positions**2).sum(1)
+    cos_theta = positions[:, 2] / np.sqrt(d2)
+    return float(math.pi / (cos_theta / d2).sum())
+
+
+def build_geometry(scene: Scene, size: int) -> Geometry:
+    s = scene.sonar
+    heights = height_array(scene.seafloor, s.chip_size, size, scene.seed)
+    floor = floor_mesh(heights, s.chip_size, scene.seafloor.albedo)
+    targets = tuple(target_mesh(t, heights, s.chip_size, f"targets[{i}]") for i, t in enumerate(scene.targets))
+    positions = emitter_positions(scene)
+    return Geometry(
+        size=size,
+        metres_per_unit=s.chip_size / 2,
+        floor=floor,
+        targets=targets,
+        emitter_positions=positions.astype(np.float64),
+        aim=np.zeros(3),
+        cone_angle=s.cone_angle,
+        beam_width=0.75 * s.cone_angle,
+        emitter_intensity=s.intensity * scene.post.gain * exposure(positions),
+    )

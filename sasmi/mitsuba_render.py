@@ -1,0 +1,322 @@
+"""The one module that owns Mitsuba and Dr.Jit: Geometry -> image, mask and labels.
+
+Render model: Lambertian seafloor and targets lit by spot lights along the track, seen
+by an orthographic camera straight down (the paper's POV-Ray set-up). The `direct`
+integrator samples one emitter per sample, so cost does not grow with the number of
+emitters. The image is `gain * intensity * radiance / radiance_ref` (see
+`geometry.exposure`), then optional speckle and noise, clipped to [0, 1].
+
+Consecutive scenes with the same structure (pixel count, emitter count, target vertex
+counts) update the loaded Mitsuba scene through `mi.traverse`, so the JIT compiles the
+render kernel once per process and later images cost only the render itself.
+"""
+from __future__ import annotations
+
+import glob
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from sasmi.errors import SasmiError
+from sasmi.geometry import Geometry, TriangleMesh, build_geometry
+from sasmi.scene import Scene, scene_to_dict
+
+VARIANT = "llvm_ad_mono"
+MASK_SEAFLOOR, MASK_TARGET, MASK_SHADOW = 0, 1, 2
+LLVM_HINT = ("Mitsuba's CPU backend needs LLVM 19: install it with `apt-get install libllvm19` "
+             "(or point DRJIT_LIBLLVM_PATH at a libLLVM.so of version 16 or newer)")
+CAMERA_HEIGHT = 50.0  # chip units above the floor; far above any target
+SHADOW_FRACTION = 0.5  # a floor point is in acoustic shadow when a target hides it from half the array
+SHADOW_PROBES = 8  # emitters, evenly spread over the array, that the shadow mask is tested against
+
+
+def _find_llvm() -> str | None:
+    """Newest libLLVM >= 16 on the system; Debian 12's default 14/15 crash Dr.Jit 1.5."""
+    found = []
+    for path in glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*"):
+        m = re.search(r"libLLVM(?:-|\.so\.)(\d+)", os.path.basename(path))
+        if m and int(m.group(1)) >= 16:
+            found.append((int(m.group(1)), path))
+    return max(found)[1] if found else None
+
+
+def _import_mitsuba():
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        path = _find_llvm()
+        if path is None:
+            raise SasmiError(LLVM_HINT)
+        os.environ["DRJIT_LIBLLVM_PATH"] = path
+    import drjit as dr
+    import mitsuba as mi
+
+    try:
+        mi.set_variant(VARIANT)
+    except (ImportError, RuntimeError) as e:
+        raise SasmiError(f"{LLVM_HINT} ({e})") from None
+    return mi, dr
+
+
+def versions() -> dict:
+    mi, dr = _import_mitsuba()
+    return {"mitsuba": mi.__version__, "drjit": dr.__version__, "variant": VARIANT,
+            "llvm": os.environ.get("DRJIT_LIBLLVM_PATH", "")}
+
+
+@dataclass(frozen=True)
+class Rendered:
+    image: np.ndarray  # (H, W) float32 in [0, 1]
+    mask: np.ndarray  # (H, W) uint8: 0 seafloor, 1 target, 2 acoustic shadow
+    labels: dict
+
+
+def _mi_mesh(mi, name: str, mesh: TriangleMesh):
+    m = mi.Mesh(name, vertex_count=len(mesh.vertices), face_count=len(mesh.faces), has_vertex_normals=False)
+    params = mi.traverse(m)
+    params["vertex_positions"] = mesh.vertices.ravel()
+    params["faces"] = mesh.faces.ravel()
+    params.update()
+    return m
+
+
+class Renderer:
+    """Renders scenes at one size and sample count, reusing the compiled kernel."""
+
+    def __init__(self, size: int = 256, spp: int = 16):
+        if size <= 0 or size % 16:
+            raise SasmiError(f"size: {size} is not allowed (allowed: a positive multiple of 16)")
+        if spp <= 0:
+            raise SasmiError(f"spp: {spp} is not allowed (allowed: >= 1)")
+        self.size, self.spp = size, spp
+        self.mi, self.dr = _import_mitsuba()
+        self._structure = None
+        self._scene = None
+        self._params = None
+        self._target_ids: np.ndarray | None = None
+
+    # -- scene construction -------------------------------------------------------------
+    def _spot_to_world(self, position: np.ndarray, aim: np.ndarray):
+        return self.mi.ScalarTransform4f().look_at(origin=position.tolist(), target=aim.tolist(), up=[0, 0, 1])
+
+    def _load(self, g: Geometry) -> None:
+        mi = self.mi
+        # Mitsuba's camera x axis points left of the image; mirror it so range grows to the right.
+        camera = (mi.ScalarTransform4f().look_at(origin=[0, 0, CAMERA_HEIGHT], target=[0, 0, 0], up=[0, -1, 0])
+                  @ mi.ScalarTransform4f().scale([-1, 1, 1]))
+        d = {
+            "type": "scene",
+            "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+            "sensor": {
+                "type": "orthographic",
+                "to_world": camera,
+                "near_clip": 1.0,
+                "far_clip": 2 * CAMERA_HEIGHT,
+                "film": {"type": "hdrfilm", "width": g.size, "height": g.size, "pixel_format": "luminance",
+                         "rfilter": {"type": "box"}},
+                "sampler": {"type": "independent", "sample_count": self.spp},
+            },
+            "floor": _mi_mesh(mi, "floor", g.floor),
+        }
+        d["floor"].set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "uniform", "value": g.floor.albedo}}))
+        for k, t in enumerate(g.targets):
+            m = _mi_mesh(mi, f"target_{k}", t)
+            m.set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "uniform", "value": t.albedo}}))
+            d[f"target_{k}"] = m
+        # One intensity texture shared by every spot: traverse lists it once, under emitter_0.
+        intensity = mi.load_dict({"type": "uniform", "value": g.emitter_intensity})
+        for k, p in enumerate(g.emitter_positions):
+            d[f"emitter_{k}"] = {
+                "type": "spot",
+                "to_world": self._spot_to_world(p, g.aim),
+                "cutoff_angle": g.cone_angle,
+                "beam_width": g.beam_width,
+                "intensity": intensity,
+            }
+        self._scene = mi.load_dict(d)
+        self._params = mi.traverse(self._scene)
+        # Shadow rays are traced against the targets alone, so a ripple between a floor
+        # point and a target does not punch a hole in that target's acoustic shadow.
+        self._occluders = mi.load_dict({"type": "scene", **{f"target_{k}": _mi_mesh(mi, f"target_{k}", t)
+                                                              for k, t in enumerate(g.targets)}})
+        self._occluder_params = mi.traverse(self._occluders)
+        self._target_ids = self._shape_ids(self._scene, len(g.targets))
+        self._occluder_ids = self._shape_ids(self._occluders, len(g.targets))
+        self._structure = g.structure
+
+    def _shape_ids(self, scene, count: int) -> np.ndarray:
+        by_name = {s.id(): s for s in scene.shapes()}
+        return np.array([self.dr.reinterpret_array(self.mi.UInt32, self.mi.ShapePtr(by_name[f"target_{k}"]))[0]
+                         for k in range(count)], dtype=np.int64)
+
+    def _update(self, g: Geometry) -> None:
+        p = self._params
+        p["floor.vertex_positions"] = g.floor.vertices.ravel()
+        p["floor.bsdf.reflectance.value"] = g.floor.albedo
+        for k, t in enumerate(g.targets):
+            p[f"target_{k}.vertex_positions"] = t.vertices.ravel()
+            p[f"target_{k}.bsdf.reflectance.value"] = t.albedo
+            self._occluder_params[f"target_{k}.vertex_positions"] = t.vertices.ravel()
+        if g.targets:
+            self._occluder_params.update()
+        for k, pos in enumerate(g.emitter_positions):
+            p[f"emitter_{k}.to_world"] = self._spot_to_world(pos, g.aim)
+        p["emitter_0.intensity.value"] = g.emitter_intensity
+        p.update()
+
+    def prepare(self, g: Geometry) -> None:
+        """Load or update the Mitsuba scene so that it shows `g`."""
+        if g.structure != self._structure:
+            self._load(g)
+        else:
+            self._update(g)
+
+    @property
+    def mitsuba_scene(self):
+        return self._scene
+
+    @property
+    def params(self):
+        return self._params
+
+    # -- rendering ----------------------------------------------------------------------
+    def radiance(self, seed: int) -> np.ndarray:
+        """(H, W) float32 radiance of the prepared scene, exposure folded in (not clipped)."""
+        img = self.mi.render(self._scene, spp=self.spp, seed=seed % (2**31))
+        return np.asarray(img, dtype=np.float32).reshape(self.size, self.size)
+
+    def visibility(self, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
+        """Per pixel: index of the visible target (-1 none) and of the target shadowing it (-1 none).
+
+        Camera rays through pixel centres find the visible surface; from each floor hit a
+        ray towards every emitter asks which target, if any, is hit first. A floor point
+        hidden by a target from at least SHADOW_FRACTION of SHADOW_PROBES emitters spread over
+        the array is acoustic shadow.
+        """
+        mi, dr = self.mi, self.dr
+        n = self.size
+        centres = (np.arange(n) + 0.5) / n * 2 - 1
+        xs, ys = np.meshgrid(centres, centres)
+        origin = mi.Point3f(xs.ravel(), ys.ravel(), np.full(n * n, CAMERA_HEIGHT, dtype=np.float32))
+        si = self._scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+        hit_ids = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64)
+        visible = self._index_of(hit_ids, self._target_ids)
+
+        lifted = np.asarray(si.p + si.n * 1e-4, dtype=np.float32).reshape(3, -1).T  # (P, 3)
+        emitters = shadow_emitters(g.emitter_positions).astype(np.float32)  # (K, 3)
+        owner = np.full(n * n, -1, dtype=np.int64)
+        candidates = np.nonzero(shadow_candidates(g, lifted) & (visible < 0))[0]
+        if candidates.size:
+            # One launch for all probes: positions travel as array data, not as kernel
+            # literals, so the kernel compiles once and serves every scene.
+            points = lifted[candidates]
+            origins = np.tile(points, (len(emitters), 1))  # (K * C, 3), probe-major
+            to_light = np.repeat(emitters, len(points), axis=0) - origins
+            dist = np.linalg.norm(to_light, axis=1)
+            rays = mi.Ray3f(mi.Point3f(*origins.T), mi.Vector3f(*(to_light / dist[:, None]).T))
+            hits = self._occluders.ray_intersect(mi.Ray3f(rays, mi.Float(dist * (1 - 1e-4))))
+            blocker = self._index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64),
+                                     self._occluder_ids)
+            counts = np.zeros((len(g.targets) + 1, len(points)), dtype=np.int32)  # row 0: nothing in the way
+            for per_probe in blocker.reshape(len(emitters), len(points)):
+                counts[per_probe + 1, np.arange(len(points))] += 1  # one blocker per point: no repeats
+            blocked = counts[1:]
+            owner[candidates] = np.where(blocked.max(axis=0) >= SHADOW_FRACTION * len(emitters),
+                                         blocked.argmax(axis=0), -1)
+        owner = np.where(visible >= 0, -1, owner)
+        return visible.reshape(n, n), owner.reshape(n, n)
+
+    @staticmethod
+    def _index_of(shape_ids: np.ndarray, target_ids: np.ndarray) -> np.ndarray:
+        """Map Mitsuba shape registry ids to target indices (-1 for floor or miss)."""
+        out = np.full(shape_ids.shape, -1, dtype=np.int64)
+        for k, sid in enumerate(target_ids):
+            out[shape_ids == sid] = k
+        return out
+
+    def render(self, scene: Scene) -> Rendered:
+        g = build_geometry(scene, self.size)
+        self.prepare(g)
+        image = postprocess(self.radiance(scene.seed), scene)
+        visible, owner = self.visibility(g)
+        mask = np.full((self.size, self.size), MASK_SEAFLOOR, dtype=np.uint8)
+        mask[owner >= 0] = MASK_SHADOW
+        mask[visible >= 0] = MASK_TARGET
+        return Rendered(image=image, mask=mask, labels=labels_for(scene, visible, owner, self.size))
+
+
+def shadow_emitters(positions: np.ndarray) -> np.ndarray:
+    """SHADOW_PROBES emitters spread evenly over the array (all of them if there are fewer)."""
+    if len(positions) <= SHADOW_PROBES:
+        return positions
+    return positions[np.round(np.linspace(0, len(positions) - 1, SHADOW_PROBES)).astype(int)]
+
+
+def shadow_candidates(g: Geometry, points: np.ndarray) -> np.ndarray:
+    """(P,) bool: floor points whose rays towards the array could pass over a target's footprint.
+
+    A ray from floor point p to an emitter at (x_track, y_e) crosses x at the fraction
+    f = (p_x - x) / (p_x - x_track) of its way; its y there is p_y + (y_e - p_y) f. The
+    extremes over the footprint's x-range and the array's y-range bound where it can be.
+    Only candidates are traced, which keeps the shadow mask cheap on a mostly empty chip.
+    """
+    px, py = points[:, 0].astype(np.float64), points[:, 1].astype(np.float64)
+    x_track = g.emitter_positions[0, 0]
+    ye0, ye1 = g.emitter_positions[:, 1].min(), g.emitter_positions[:, 1].max()
+    out = np.zeros(len(points), dtype=bool)
+    for t in g.targets:
+        (x0, y0), (x1, y1) = t.vertices[:, :2].min(0), t.vertices[:, :2].max(0)
+        beyond = px > x0
+        span = np.maximum(px - x_track, 1e-9)
+        f_near, f_far = np.clip((px - x1) / span, 0, 1), np.clip((px - x0) / span, 0, 1)
+        corners = [py + (ye - py) * f for ye in (ye0, ye1) for f in (f_near, f_far)]
+        out |= beyond & (np.minimum.reduce(corners) <= y1) & (np.maximum.reduce(corners) >= y0)
+    return out
+
+
+def postprocess(radiance: np.ndarray, scene: Scene) -> np.ndarray:
+    """Speckle (gamma, mean 1) and additive Gaussian noise, seeded by the scene; clip to [0, 1]."""
+    post = scene.post
+    rng = np.random.default_rng([scene.seed, 11])
+    image = radiance.astype(np.float64)
+    if post.speckle_looks > 0:
+        image = image * rng.gamma(post.speckle_looks, 1.0 / post.speckle_looks, size=image.shape)
+    if post.noise_std > 0:
+        image = image + rng.normal(0.0, post.noise_std, size=image.shape)
+    return np.clip(image, 0.0, 1.0).astype(np.float32)
+
+
+def _bbox(pixels: np.ndarray) -> list[int] | None:
+    rows, cols = np.nonzero(pixels)
+    if len(rows) == 0:
+        return None
+    return [int(cols.min()), int(rows.min()), int(cols.max()) + 1, int(rows.max()) + 1]
+
+
+def labels_for(scene: Scene, visible: np.ndarray, owner: np.ndarray, size: int) -> dict:
+    """Scene parameters plus, per target, its pixel centre and boxes (col0, row0, col1, row1; end exclusive)."""
+    half = scene.sonar.chip_size / 2
+    params = scene_to_dict(scene)
+    targets = []
+    for k, t in enumerate(params.pop("targets")):
+        targets.append({
+            **t,
+            "pixel_centre": [(t["x"] + half) / scene.sonar.chip_size * size - 0.5,
+                             (t["y"] + half) / scene.sonar.chip_size * size - 0.5],
+            "bbox": _bbox(visible == k),
+            "shadow_bbox": _bbox(owner == k),
+            "visible_pixels": int((visible == k).sum()),
+            "shadow_pixels": int((owner == k).sum()),
+        })
+    return {**params, "targets": targets, "size": size}
+
+
+_default_renderers: dict[tuple[int, int], Renderer] = {}
+
+
+def render(scene: Scene, size: int = 256, spp: int = 16) -> Rendered:
+    """One-call API: image, mask and labels of `scene` (renderers are cached per size/spp)."""
+    key = (size, spp)
+    if key not in _default_renderers:
+        _default_renderers[key] = Renderer(size=size, spp=spp)
+    return _default_renderers[key].render(scene)

@@ -1,0 +1,329 @@
+"""Scene description: plain frozen dataclasses, loaded from TOML presets in `scenes/`.
+
+No renderer is imported here; both renderers (Mitsuba, POV-Ray) read the same `Scene`.
+
+Coordinates: x is ground range (m), increasing to the right of the image, the sonar
+track is off the left edge at x = 0; y is along-track (m), image rows; z is up.
+Target positions are given relative to the chip centre.
+
+A preset value may be a plain value or a distribution, `{uniform = [lo, hi]}`,
+`{normal = [mean, std]}` or `{choice = [a, b, ...]}`, so one preset describes a family
+of scenes; `Preset.sample(seed, index)` draws scene `index` from a generator seeded by
+(seed, index) alone, so any scene can be re-made without the ones before it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from sasmi.errors import SasmiError
+
+SHAPES = ("cylinder", "sphere", "cone", "mesh")
+
+
+def _positive(v: float) -> bool:
+    return v > 0
+
+
+def _nonneg(v: float) -> bool:
+    return v >= 0
+
+
+def _unit(v: float) -> bool:
+    return 0 <= v <= 1
+
+
+def _spec(default: Any, check: Callable[[Any], bool] | None = None, allowed: str = "", doc: str = "") -> Any:
+    return field(default=default, metadata={"check": check, "allowed": allowed, "doc": doc})
+
+
+@dataclass(frozen=True)
+class Sonar:
+    max_range: float = _spec(60.0, _positive, "> 0", "m; the array flies at altitude max_range / 10")
+    near_range: float = _spec(30.0, _nonneg, ">= 0", "m; ground range of the chip's left edge")
+    chip_size: float = _spec(6.0, _positive, "> 0", "m; ground extent of the square chip")
+    track_length: float = _spec(20.0, _positive, "> 0", "m; synthetic aperture, centred on the chip")
+    emitters: int = _spec(32, _positive, ">= 1", "spot lights evenly spaced along the track")
+    cone_angle: float = _spec(30.0, lambda v: 0 < v < 90, "in (0, 90)", "deg; beam half-angle (cutoff)")
+    intensity: float = _spec(1.0, _positive, "> 0", "source level, relative to the calibrated exposure")
+
+    @property
+    def altitude(self) -> float:
+        return self.max_range / 10.0
+
+
+@dataclass(frozen=True)
+class Seafloor:
+    albedo: float = _spec(0.5, _unit, "in [0, 1]", "Lambertian reflectance of the sediment")
+    rms_height: float = _spec(0.03, _nonneg, ">= 0", "m; rms of the power-law rough surface")
+    correlation_length: float = _spec(0.5, _positive, "> 0", "m; roll-off scale of the roughness spectrum")
+    spectral_exponent: float = _spec(3.5, _positive, "> 0", "power-law exponent of the roughness spectrum")
+    ripple_amplitude: float = _spec(0.0, _nonneg, ">= 0", "m; sand-ripple amplitude")
+    ripple_wavelength: float = _spec(0.8, _positive, "> 0", "m")
+    ripple_direction: float = _spec(0.0, None, "", "deg; direction of the ripple wave vector from +x (range)")
+    rocks: int = _spec(0, _nonneg, ">= 0", "number of rock/clutter bumps")
+    rock_radius: float = _spec(0.15, _positive, "> 0", "m; size of each bump")
+
+
+@dataclass(frozen=True)
+class Target:
+    shape: str = _spec("cylinder", lambda v: v in SHAPES, "one of " + ", ".join(SHAPES))
+    x: float = _spec(0.0, None, "", "m from the chip centre along range")
+    y: float = _spec(0.0, None, "", "m from the chip centre along track")
+    yaw: float = _spec(0.0, None, "", "deg; axis angle from +x (range) towards +y (along-track)")
+    burial: float = _spec(0.0, _nonneg, ">= 0", "m of the target's height below the local seafloor")
+    length: float = _spec(2.0, _positive, "> 0", "m; cylinder length, cone height")
+    radius: float = _spec(0.3, _positive, "> 0", "m; cylinder/sphere radius, cone base radius")
+    radius_top: float = _spec(0.1, _nonneg, ">= 0", "m; top radius of the truncated cone")
+    mesh: str = _spec("", None, "", "OBJ/STL/PLY path (shape = 'mesh'), relative to the preset")
+    scale: float = _spec(1.0, _positive, "> 0", "scale applied to a mesh file")
+    albedo: float = _spec(0.9, _unit, "in [0, 1]")
+
+    @property
+    def lying(self) -> bool:
+        """Cylinders lie on their side, as most seabed cylinders do; cones stand upright."""
+        return self.shape == "cylinder"
+
+
+@dataclass(frozen=True)
+class Post:
+    gain: float = _spec(0.8, _positive, "> 0",
+                        "gray level of a flat albedo-1 seafloor at the chip centre lit by the array at intensity 1")
+    speckle_looks: float = _spec(0.0, _nonneg, ">= 0", "L of gamma-distributed multiplicative speckle; 0 = off")
+    noise_std: float = _spec(0.0, _nonneg, ">= 0", "std of additive Gaussian noise in gray levels (0..1)")
+
+
+@dataclass(frozen=True)
+class TargetGrid:
+    """Targets on a regular grid over the chip (the paper's target field)."""
+    spacing: float = _spec(5.0, _positive, "> 0", "m between grid points")
+    jitter: float = _spec(0.0, _nonneg, ">= 0", "m; uniform random offset of each target")
+
+
+@dataclass(frozen=True)
+class Scene:
+    sonar: Sonar = Sonar()
+    seafloor: Seafloor = Seafloor()
+    targets: tuple[Target, ...] = ()
+    post: Post = Post()
+    seed: int = 0  # drives the heightfield, rocks, speckle and the sampler
+
+    def validate(self) -> "Scene":
+        """Cross-field checks; raises SasmiError naming the field."""
+        s = self.sonar
+        if s.near_range + s.chip_size > s.max_range:
+            raise SasmiError(f"sonar.near_range: chip far edge {s.near_range + s.chip_size:g} m exceeds "
+                             f"sonar.max_range {s.max_range:g} m")
+        half = s.chip_size / 2
+        for i, t in enumerate(self.targets):
+            if not (-half < t.x < half):
+                raise SasmiError(f"targets[{i}].x: {t.x:g} m lies outside the chip (allowed: -{half:g} < x < {half:g})")
+            if not (-half < t.y < half):
+                raise SasmiError(f"targets[{i}].y: {t.y:g} m lies outside the chip (allowed: -{half:g} < y < {half:g})")
+            if t.shape == "mesh" and not t.mesh:
+                raise SasmiError(f"targets[{i}].mesh: a file path is required when shape = 'mesh'")
+            height = target_height(t)
+            if height is not None and t.burial >= height:
+                raise SasmiError(f"targets[{i}].burial: {t.burial:g} m buries the whole target "
+                                 f"(allowed: 0 <= burial < height {height:g} m)")
+            if t.shape == "cone" and t.radius_top > t.radius:
+                raise SasmiError(f"targets[{i}].radius_top: {t.radius_top:g} exceeds radius {t.radius:g}")
+        return self
+
+
+def target_height(t: Target) -> float | None:
+    """Height of the target above its lowest point; None for meshes (known only once loaded)."""
+    if t.shape in ("cylinder", "sphere"):
+        return 2 * t.radius
+    if t.shape == "cone":
+        return t.length
+    return None
+
+
+# ---------------------------------------------------------------------------------------
+# Presets: TOML with distributions
+# ---------------------------------------------------------------------------------------
+
+SECTIONS = {"sonar": Sonar, "seafloor": Seafloor, "post": Post}
+TOP_KEYS = set(SECTIONS) | {"targets", "target_grid", "description"}
+
+
+def _is_distribution(v: Any) -> bool:
+    return isinstance(v, dict)
+
+
+def _check_value(cls: type, name: str, value: Any, where: str) -> Any:
+    f = {f.name: f for f in dataclasses.fields(cls)}[name]
+    allowed = f.metadata.get("allowed") or ""
+    expected = type(f.default)
+    if expected is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if expected is int and isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if type(value) is not expected:
+        raise SasmiError(f"{where}: expected {expected.__name__}, got {type(value).__name__} {value!r}")
+    check = f.metadata.get("check")
+    if check is not None and not check(value):
+        raise SasmiError(f"{where}: {value!r} is not allowed (allowed: {allowed})")
+    return value
+
+
+def _check_distribution(cls: type, name: str, dist: dict, where: str) -> None:
+    if len(dist) != 1 or next(iter(dist)) not in ("uniform", "normal", "choice"):
+        raise SasmiError(f"{where}: a distribution is one of {{uniform = [lo, hi]}}, {{normal = [mean, std]}}, "
+                         f"{{choice = [...]}}; got {dist!r}")
+    kind, args = next(iter(dist.items()))
+    if not isinstance(args, list) or not args:
+        raise SasmiError(f"{where}.{kind}: expected a non-empty list")
+    if kind == "choice":
+        for v in args:
+            _check_value(cls, name, v, where)
+        return
+    if len(args) != 2 or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in args):
+        raise SasmiError(f"{where}.{kind}: expected two numbers, got {args!r}")
+    if kind == "uniform":
+        if args[0] > args[1]:
+            raise SasmiError(f"{where}.uniform: lower bound {args[0]} exceeds upper bound {args[1]}")
+        for v in args:
+            _check_value(cls, name, float(v) if isinstance(cls.__dataclass_fields__[name].default, float) else v, where)
+    elif args[1] < 0:
+        raise SasmiError(f"{where}.normal: std {args[1]} is negative")
+
+
+def _check_table(cls: type, table: Any, where: str, skip: tuple[str, ...] = ()) -> None:
+    if not isinstance(table, dict):
+        raise SasmiError(f"{where}: expected a table, got {type(table).__name__}")
+    names = [f.name for f in dataclasses.fields(cls) if f.name not in skip]
+    for key, value in table.items():
+        if key not in names:
+            raise SasmiError(f"{where}.{key}: unknown key (allowed: {', '.join(names)})")
+        if _is_distribution(value):
+            _check_distribution(cls, key, value, f"{where}.{key}")
+        else:
+            _check_value(cls, key, value, f"{where}.{key}")
+
+
+def _draw(value: Any, rng: np.random.Generator) -> Any:
+    if not _is_distribution(value):
+        return value
+    kind, args = next(iter(value.items()))
+    if kind == "uniform":
+        return float(rng.uniform(args[0], args[1]))
+    if kind == "normal":
+        return float(rng.normal(args[0], args[1]))
+    return args[int(rng.integers(len(args)))]
+
+
+def _sample_table(cls: type, table: dict, rng: np.random.Generator, where: str, **fixed: Any) -> Any:
+    # Draw every distribution in the dataclass's field order so the draw sequence does not
+    # depend on the order keys were written in the preset.
+    values = dict(fixed)
+    for f in dataclasses.fields(cls):
+        if f.name in table:
+            drawn = _draw(table[f.name], rng)
+            if type(f.default) is int and isinstance(drawn, float):
+                drawn = int(round(drawn))  # uniform/normal over an integer field draws integers
+            values[f.name] = _check_value(cls, f.name, drawn, f"{where}.{f.name}")
+    return cls(**values)
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A validated preset: a family of scenes. `sample(seed, index)` returns one `Scene`."""
+    raw: dict
+    path: Path | None = None
+
+    @classmethod
+    def from_dict(cls, raw: dict, path: Path | None = None) -> "Preset":
+        for key in raw:
+            if key not in TOP_KEYS:
+                raise SasmiError(f"{key}: unknown section (allowed: {', '.join(sorted(TOP_KEYS))})")
+        for name, section in SECTIONS.items():
+            if name in raw:
+                _check_table(section, raw[name], name)
+        targets = raw.get("targets", [])
+        if not isinstance(targets, list):
+            raise SasmiError("targets: expected an array of tables ([[targets]])")
+        for i, t in enumerate(targets):
+            _check_table(Target, t, f"targets[{i}]")
+        if "target_grid" in raw:
+            grid = dict(raw["target_grid"])
+            if not isinstance(grid, dict):
+                raise SasmiError("target_grid: expected a table")
+            target = grid.pop("target", {})
+            _check_table(TargetGrid, grid, "target_grid")
+            _check_table(Target, target, "target_grid.target", skip=("x", "y"))
+        preset = cls(raw=raw, path=path)
+        preset.sample(0, 0)  # cross-field checks on one draw, so a broken preset fails at load
+        return preset
+
+    def resolve_mesh(self, mesh: str) -> Path:
+        p = Path(mesh).expanduser()
+        if not p.is_absolute() and self.path is not None:
+            p = self.path.parent / p
+        return p
+
+    def sample(self, seed: int, index: int) -> Scene:
+        rng = np.random.default_rng([seed, index])
+        sonar = _sample_table(Sonar, self.raw.get("sonar", {}), rng, "sonar")
+        seafloor = _sample_table(Seafloor, self.raw.get("seafloor", {}), rng, "seafloor")
+        post = _sample_table(Post, self.raw.get("post", {}), rng, "post")
+        targets = [_sample_table(Target, t, rng, f"targets[{i}]") for i, t in enumerate(self.raw.get("targets", []))]
+        if "target_grid" in self.raw:
+            targets += self._grid_targets(sonar, rng, len(targets))
+        targets = [dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" else t
+                   for t in targets]
+        scene_seed = int(rng.integers(2**31 - 1))
+        return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed).validate()
+
+    def _grid_targets(self, sonar: Sonar, rng: np.random.Generator, first: int) -> list[Target]:
+        grid_raw = dict(self.raw["target_grid"])
+        target_raw = grid_raw.pop("target", {})
+        grid = _sample_table(TargetGrid, grid_raw, rng, "target_grid")
+        half = sonar.chip_size / 2
+        count = int(math.floor(sonar.chip_size / grid.spacing))
+        if count < 1:
+            raise SasmiError(f"target_grid.spacing: {grid.spacing:g} m leaves no room on a {sonar.chip_size:g} m chip")
+        centres = (np.arange(count) + 0.5) * grid.spacing - count * grid.spacing / 2
+        targets = []
+        for row, y in enumerate(centres):
+            for col, x in enumerate(centres):
+                k = first + row * count + col
+                jx, jy = rng.uniform(-grid.jitter, grid.jitter, size=2)
+                xy = {"x": float(np.clip(x + jx, -half * 0.98, half * 0.98)),
+                      "y": float(np.clip(y + jy, -half * 0.98, half * 0.98))}
+                targets.append(_sample_table(Target, target_raw, rng, f"targets[{k}]", **xy))
+        return targets
+
+
+def load_preset(path: str | Path) -> Preset:
+    """Read and validate a TOML preset; errors name the file or the field."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise SasmiError(f"{path}: preset not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise SasmiError(f"{path}: cannot read preset ({e})") from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SasmiError(f"{path}: not valid TOML ({e})") from None
+    return Preset.from_dict(raw, path=path)
+
+
+def scene_to_dict(scene: Scene) -> dict:
+    return dataclasses.asdict(scene)
+
+
+def scene_from_dict(d: dict) -> Scene:
+    """Inverse of scene_to_dict (used by labels and the differentiable fit)."""
+    return Scene(sonar=Sonar(**d["sonar"]), seafloor=Seafloor(**d["seafloor"]),
+                 targets=tuple(Target(**t) for t in d["targets"]), post=Post(**d["post"]),
+                 seed=int(d["seed"])).validate()
