@@ -116,11 +116,26 @@ def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     return v, np.asarray(f, dtype=np.uint32)
 
 
-def target_mesh(t: Target, heights_m: np.ndarray, chip_size: float, where: str) -> TriangleMesh:
+def check_targets(scene: Scene) -> None:
+    """Load every mesh-file target and check its burial, so bad files fail before a run writes anything.
+
+    Built-in shapes need no load: Scene.validate already knows their height.
+    """
+    for i, t in enumerate(scene.targets):
+        if t.shape == "mesh":
+            _checked_shape(t, f"targets[{i}]")
+
+
+def _checked_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     v, f = _unit_shape(t, where)
     height = v[:, 2].max()
     if t.burial >= height:
         raise SasmiError(f"{where}.burial: {t.burial:g} m buries the whole target (height {height:g} m)")
+    return v, f
+
+
+def target_mesh(t: Target, heights_m: np.ndarray, chip_size: float, where: str) -> TriangleMesh:
+    v, f = _checked_shape(t, where)
     yaw = math.radians(t.yaw)
     rot = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
     ground = height_at(heights_m, chip_size, t.x, t.y)
@@ -146,6 +161,22 @@ def exposure(positions: np.ndarray) -> float:
     d2 = (positions**2).sum(1)
     cos_theta = positions[:, 2] / np.sqrt(d2)
     return float(math.pi / (cos_theta / d2).sum())
+
+
+def flat_floor_irradiance(positions: np.ndarray, size: int) -> np.ndarray:
+    """(size, size) sum of cos(theta) / d^2 over the emitters for a flat floor at pixel centres."""
+    centres = (np.arange(size) + 0.5) / size * 2 - 1
+    x, y = np.meshgrid(centres, centres)
+    total = np.zeros_like(x)
+    for px, py, pz in positions:
+        d2 = (px - x) ** 2 + (py - y) ** 2 + pz**2
+        total += pz / np.sqrt(d2) / d2
+    return total
+
+
+def tvg_gain(positions: np.ndarray, size: int) -> np.ndarray:
+    """(size, size) gain that makes a flat floor equally bright everywhere, 1 at the chip centre."""
+    return (math.pi / exposure(positions)) / flat_floor_irradiance(positions, size)
 
 
 def build_geometry(scene: Scene, size: int) -> Geometry:

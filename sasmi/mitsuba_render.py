@@ -3,8 +3,10 @@
 Render model: Lambertian seafloor and targets lit by spot lights along the track, seen
 by an orthographic camera straight down (the paper's POV-Ray set-up). The `direct`
 integrator samples one emitter per sample, so cost does not grow with the number of
-emitters. The image is `gain * intensity * radiance / radiance_ref` (see
-`geometry.exposure`), then optional speckle and noise, clipped to [0, 1].
+emitters. The radiance is scaled so that flat albedo-1 sand at the chip centre has gray
+level `post.gain * sonar.intensity` (see `geometry.exposure`); then an optional
+time-varying gain evens out the flat-floor brightness over range (as a sonar's TVG does),
+then optional speckle and noise; the result is clipped to [0, 1].
 
 Consecutive scenes with the same structure (pixel count, emitter count, target vertex
 counts) update the loaded Mitsuba scene through `mi.traverse`, so the JIT compiles the
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sasmi.errors import SasmiError
-from sasmi.geometry import Geometry, TriangleMesh, build_geometry
+from sasmi.geometry import Geometry, TriangleMesh, build_geometry, tvg_gain
 from sasmi.scene import Scene, scene_to_dict
 
 VARIANT = "llvm_ad_mono"
@@ -32,13 +34,18 @@ SHADOW_FRACTION = 0.5  # a floor point is in acoustic shadow when a target hides
 SHADOW_PROBES = 8  # emitters, evenly spread over the array, that the shadow mask is tested against
 
 
+def _llvm_version(path: str) -> int | None:
+    m = re.search(r"libLLVM(?:-|\.so\.)(\d+)", os.path.basename(path))
+    return int(m.group(1)) if m else None
+
+
 def _find_llvm() -> str | None:
     """Newest libLLVM >= 16 on the system; Debian 12's default 14/15 crash Dr.Jit 1.5."""
     found = []
     for path in glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*"):
-        m = re.search(r"libLLVM(?:-|\.so\.)(\d+)", os.path.basename(path))
-        if m and int(m.group(1)) >= 16:
-            found.append((int(m.group(1)), path))
+        version = _llvm_version(path)
+        if version is not None and version >= 16:
+            found.append((version, path))
     return max(found)[1] if found else None
 
 
@@ -48,6 +55,9 @@ def _import_mitsuba():
         if path is None:
             raise SasmiError(LLVM_HINT)
         os.environ["DRJIT_LIBLLVM_PATH"] = path
+    version = _llvm_version(os.environ["DRJIT_LIBLLVM_PATH"])
+    if version is not None and version < 16:  # would abort the process later ("Cannot select ... fminimum")
+        raise SasmiError(f"DRJIT_LIBLLVM_PATH points at LLVM {version}; {LLVM_HINT}")
     import drjit as dr
     import mitsuba as mi
 
@@ -237,7 +247,7 @@ class Renderer:
     def render(self, scene: Scene) -> Rendered:
         g = build_geometry(scene, self.size)
         self.prepare(g)
-        image = postprocess(self.radiance(scene.seed), scene)
+        image = postprocess(self.radiance(scene.seed), scene, g)
         visible, owner = self.visibility(g)
         mask = np.full((self.size, self.size), MASK_SEAFLOOR, dtype=np.uint8)
         mask[owner >= 0] = MASK_SHADOW
@@ -274,11 +284,13 @@ def shadow_candidates(g: Geometry, points: np.ndarray) -> np.ndarray:
     return out
 
 
-def postprocess(radiance: np.ndarray, scene: Scene) -> np.ndarray:
-    """Speckle (gamma, mean 1) and additive Gaussian noise, seeded by the scene; clip to [0, 1]."""
+def postprocess(radiance: np.ndarray, scene: Scene, g: Geometry) -> np.ndarray:
+    """Time-varying gain, speckle (gamma, mean 1) and additive Gaussian noise seeded by the scene; clip to [0, 1]."""
     post = scene.post
     rng = np.random.default_rng([scene.seed, 11])
     image = radiance.astype(np.float64)
+    if post.tvg:
+        image = image * tvg_gain(g.emitter_positions, g.size)
     if post.speckle_looks > 0:
         image = image * rng.gamma(post.speckle_looks, 1.0 / post.speckle_looks, size=image.shape)
     if post.noise_std > 0:

@@ -61,7 +61,7 @@ class Sonar:
 @dataclass(frozen=True)
 class Seafloor:
     albedo: float = _spec(0.5, _unit, "in [0, 1]", "Lambertian reflectance of the sediment")
-    rms_height: float = _spec(0.03, _nonneg, ">= 0", "m; rms of the power-law rough surface")
+    rms_height: float = _spec(0.01, _nonneg, ">= 0", "m; rms of the power-law rough surface")
     correlation_length: float = _spec(0.5, _positive, "> 0", "m; roll-off scale of the roughness spectrum")
     spectral_exponent: float = _spec(3.5, _positive, "> 0", "power-law exponent of the roughness spectrum")
     ripple_amplitude: float = _spec(0.0, _nonneg, ">= 0", "m; sand-ripple amplitude")
@@ -93,10 +93,12 @@ class Target:
 
 @dataclass(frozen=True)
 class Post:
-    gain: float = _spec(0.8, _positive, "> 0",
+    gain: float = _spec(0.45, _positive, "> 0",
                         "gray level of a flat albedo-1 seafloor at the chip centre lit by the array at intensity 1")
     speckle_looks: float = _spec(0.0, _nonneg, ">= 0", "L of gamma-distributed multiplicative speckle; 0 = off")
     noise_std: float = _spec(0.0, _nonneg, ">= 0", "std of additive Gaussian noise in gray levels (0..1)")
+    tvg: bool = _spec(True, None, "true or false",
+                      "time-varying gain: divide out the flat-floor spreading and grazing loss, as sonars do")
 
 
 @dataclass(frozen=True)
@@ -128,6 +130,8 @@ class Scene:
                 raise SasmiError(f"targets[{i}].y: {t.y:g} m lies outside the chip (allowed: -{half:g} < y < {half:g})")
             if t.shape == "mesh" and not t.mesh:
                 raise SasmiError(f"targets[{i}].mesh: a file path is required when shape = 'mesh'")
+            if t.shape == "mesh" and not Path(t.mesh).is_file():
+                raise SasmiError(f"targets[{i}].mesh: {t.mesh}: mesh file not found")
             height = target_height(t)
             if height is not None and t.burial >= height:
                 raise SasmiError(f"targets[{i}].burial: {t.burial:g} m buries the whole target "
@@ -277,7 +281,7 @@ class Preset:
         targets = [_sample_table(Target, t, rng, f"targets[{i}]") for i, t in enumerate(self.raw.get("targets", []))]
         if "target_grid" in self.raw:
             targets += self._grid_targets(sonar, rng, len(targets))
-        targets = [dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" else t
+        targets = [dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" and t.mesh else t
                    for t in targets]
         scene_seed = int(rng.integers(2**31 - 1))
         return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed).validate()

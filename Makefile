@@ -1,0 +1,38 @@
+# Two commands on a fresh Debian 12 machine:  `make demo`  and  `make test`.
+# Both install what they need: Debian's libllvm19 (Mitsuba's CPU backend; Debian's default
+# LLVM 14/15 crash Dr.Jit 1.5) and povray, a venv with torch 2.13.0 (CPU wheel) first, then sasmi.
+SHELL := /bin/bash
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.sasmi-installed
+DEBS := libllvm19 povray
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: setup demo test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@missing=$$(for p in $(DEBS); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages: $$missing"; \
+	  $(SUDO) apt-get update -q && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q --no-install-recommends $$missing; \
+	fi
+	python3 -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q -e '.[test]'
+	touch $@
+
+demo: setup
+	$(BIN)/sasmi render scenes/cylinder_chip.toml --count 16 --out demo/renders
+	$(BIN)/sasmi sheet demo/renders --out demo/contact_sheet.png
+
+test: setup
+	$(BIN)/pytest -q
+
+bench: setup
+	$(BIN)/python benchmarks/render.py
+
+clean:
+	rm -rf $(VENV) demo

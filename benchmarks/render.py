@@ -1,0 +1,81 @@
+"""Render speed and memory: ms/image at 256², 32 emitters, 16 spp (labels and PNG writing
+included), median over >= 20 images after warm-up; and peak RSS of `sasmi render` for
+--count 10 vs --count 1000 (memory must stay flat in the count).
+
+    .venv/bin/python benchmarks/render.py [--images 24] [--rss-counts 10 1000] [--rss-size 256]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PRESET = REPO / "scenes" / "cylinder_chip.toml"
+
+RSS_CHILD = """
+import resource, sys
+from sasmi.cli import main
+code = main(sys.argv[1:])
+print("PEAK_RSS_KB", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+sys.exit(code)
+"""
+
+
+def per_image_ms(images: int, warmup: int, size: int, spp: int) -> list[float]:
+    from sasmi.dataset import write_one
+    from sasmi.mitsuba_render import Renderer
+    from sasmi.scene import load_preset
+
+    preset = load_preset(PRESET)
+    renderer = Renderer(size=size, spp=spp)
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(warmup + images):
+            start = time.perf_counter()
+            scene = preset.sample(0, i)
+            write_one(Path(tmp), i, 0, scene, renderer.render(scene), "png")
+            times.append((time.perf_counter() - start) * 1000)
+    return times[warmup:]
+
+
+def peak_rss_mb(count: int, size: int) -> tuple[float, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", RSS_CHILD, "render", str(PRESET), "--count", str(count),
+                               "--out", str(Path(tmp) / "set"), "--size", str(size)],
+                              capture_output=True, text=True, check=True)
+        seconds = time.perf_counter() - start
+    kb = int(proc.stdout.split("PEAK_RSS_KB")[1].split()[0])
+    return kb / 1024, seconds
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--images", type=int, default=24)
+    ap.add_argument("--warmup", type=int, default=3)
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--rss-counts", type=int, nargs="*", default=[10, 1000])
+    ap.add_argument("--rss-size", type=int, default=256)
+    args = ap.parse_args()
+
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    times = per_image_ms(args.images, args.warmup, args.size, args.spp)
+    q = statistics.quantiles(times, n=10)
+    print(f"render {args.size}x{args.size}, 32 emitters, {args.spp} spp, labels + PNG: "
+          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}; {len(times)} images)")
+    for count in args.rss_counts:
+        rss, seconds = peak_rss_mb(count, args.rss_size)
+        print(f"sasmi render --count {count} --size {args.rss_size}: peak RSS {rss:.0f} MB, "
+              f"{seconds:.1f} s wall ({seconds / count * 1000:.0f} ms/image incl. start-up)")
+
+
+if __name__ == "__main__":
+    main()

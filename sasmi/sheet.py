@@ -1,0 +1,57 @@
+"""Contact sheets: a grid of chips, each beside its mask outline (red target, blue shadow)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from sasmi.errors import SasmiError
+from sasmi.images import atomic_path, list_images, read_gray, to_uint8
+
+TARGET_RGB, SHADOW_RGB = np.array([255, 60, 60]), np.array([70, 110, 255])
+
+
+def _outline(mask: np.ndarray) -> np.ndarray:
+    edge = np.zeros_like(mask, dtype=bool)
+    down, right = mask[1:, :] != mask[:-1, :], mask[:, 1:] != mask[:, :-1]
+    edge[1:, :] |= down  # mark both pixels of a change, so each class draws its own border
+    edge[:-1, :] |= down
+    edge[:, 1:] |= right
+    edge[:, :-1] |= right
+    return edge
+
+
+def tile(image01: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """(H, 2W, 3) uint8: the chip, and the chip with the mask's class boundaries drawn."""
+    gray = np.repeat(to_uint8(image01)[..., None], 3, axis=2)
+    if mask is None:
+        return gray
+    overlay = gray.copy()
+    edge = _outline(mask)
+    overlay[edge & (mask == 1)] = TARGET_RGB
+    overlay[edge & (mask == 2)] = SHADOW_RGB
+    return np.concatenate([gray, overlay], axis=1)
+
+
+def contact_sheet(folder: str | Path, out: str | Path, columns: int = 4, limit: int = 32) -> Path:
+    folder = Path(folder)
+    paths = list_images(folder)[:limit]
+    if not paths:
+        raise SasmiError(f"{folder}: no images to show")
+    tiles = []
+    for p in paths:
+        mask_path = folder / "masks" / (p.stem + ".png")
+        mask = np.asarray(Image.open(mask_path)) if mask_path.is_file() else None
+        tiles.append(tile(read_gray(p), mask))
+    h, w = max(t.shape[0] for t in tiles), max(t.shape[1] for t in tiles)
+    rows = -(-len(tiles) // columns)
+    pad = 4
+    sheet = np.full((rows * (h + pad) + pad, min(columns, len(tiles)) * (w + pad) + pad, 3), 255, dtype=np.uint8)
+    for k, t in enumerate(tiles):
+        r, c = divmod(k, columns)
+        sheet[pad + r * (h + pad):pad + r * (h + pad) + t.shape[0], pad + c * (w + pad):pad + c * (w + pad) + t.shape[1]] = t
+    out = Path(out)
+    with atomic_path(out) as tmp:
+        Image.fromarray(sheet).save(tmp, format="PNG")
+    return out

@@ -1,0 +1,45 @@
+"""Shared fixtures: the real chips beside the checkout, tiny render sets, golden images."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_CHIPS = REPO.parent / "shared" / "data" / "sonar-chips"
+FAILURES = REPO / "tests" / "_failures"
+
+
+@pytest.fixture(scope="session")
+def real_chips() -> Path:
+    if not SHARED_CHIPS.is_dir():
+        pytest.skip(f"real chips not found at {SHARED_CHIPS}")
+    return SHARED_CHIPS
+
+
+@pytest.fixture(scope="session")
+def render_set(tmp_path_factory) -> Path:
+    """8 cylinder chips at 32 px, rendered once per test session by the real renderer."""
+    from sasmi.dataset import RenderJob, render_set as write_set
+    from sasmi.scene import load_preset
+
+    out = tmp_path_factory.mktemp("renders") / "set"
+    write_set(RenderJob(preset=load_preset(REPO / "scenes" / "cylinder_chip.toml"), out=out, count=8,
+                        size=32, spp=4), progress=False)
+    return out
+
+
+def assert_matches_golden(name: str, image: np.ndarray, mean_tol: float, max_tol: float) -> None:
+    """Compare with tests/golden/NAME.npy; on failure write the image and |error| image to tests/_failures/."""
+    from sasmi.images import write_gray
+
+    golden = np.load(REPO / "tests" / "golden" / f"{name}.npy")
+    err = np.abs(image.astype(np.float64) - golden)
+    if err.mean() > mean_tol or err.max() > max_tol:
+        FAILURES.mkdir(exist_ok=True)
+        write_gray(FAILURES / f"{name}_actual.png", image)
+        write_gray(FAILURES / f"{name}_golden.png", golden)
+        write_gray(FAILURES / f"{name}_error.png", np.clip(err / max(err.max(), 1e-12), 0, 1))
+        pytest.fail(f"{name}: mean |error| {err.mean():.4f} (tol {mean_tol}), max {err.max():.4f} (tol {max_tol}); "
+                    f"images in {FAILURES}")

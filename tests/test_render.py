@@ -1,0 +1,127 @@
+"""The Mitsuba renderer: determinism, masks and labels that agree with the image, golden image."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from sasmi.errors import SasmiError
+from sasmi.mitsuba_render import MASK_SHADOW, MASK_TARGET, Renderer
+from sasmi.scene import Post, Preset, Scene, Sonar, Target, load_preset
+
+from conftest import REPO, assert_matches_golden
+
+QUIET = Post(speckle_looks=0.0, noise_std=0.0)
+
+
+@pytest.fixture(scope="module")
+def renderer64():
+    return Renderer(size=64, spp=16)
+
+
+def one_cylinder(x=-0.5, y=0.0, yaw=30.0, burial=0.05, **post) -> Scene:
+    return Scene(sonar=Sonar(near_range=35.0), targets=(Target(x=x, y=y, yaw=yaw, burial=burial),),
+                 post=dataclasses.replace(QUIET, **post), seed=5).validate()
+
+
+def test_size_must_be_multiple_of_16():
+    with pytest.raises(SasmiError, match="size: 40"):
+        Renderer(size=40)
+
+
+def test_same_scene_same_result(renderer64):
+    scene = load_preset(REPO / "scenes" / "cylinder_chip.toml").sample(0, 3)
+    a = renderer64.render(scene)
+    renderer64.render(load_preset(REPO / "scenes" / "seafloor_only.toml").sample(0, 1))  # something else between
+    b = renderer64.render(scene)
+    assert np.abs(a.image - b.image).max() <= 1 / 255
+    assert np.array_equal(a.mask, b.mask)
+    assert a.labels == b.labels
+
+
+def test_masks_and_labels_agree_with_the_image(renderer64):
+    scene = one_cylinder()
+    out = renderer64.render(scene)
+    image, mask = out.image, out.mask
+    floor = image[mask == 0]
+    shadow = image[mask == MASK_SHADOW]
+    target = image[mask == MASK_TARGET]
+    assert shadow.size > 20 and target.size > 10
+    # shadow pixels are dark (the penumbra still sees up to half the array), the lit target is bright
+    assert shadow.mean() < 0.35 * floor.mean()
+    assert np.percentile(target, 90) > 2 * floor.mean()
+    # the shadow lies on the far side of the target from the track (the track is off the left edge)
+    cols = np.arange(image.shape[1])[None, :].repeat(image.shape[0], 0)
+    assert cols[mask == MASK_SHADOW].mean() > cols[mask == MASK_TARGET].mean()
+    # the label's box contains the highlight (the brightest pixels of the chip)
+    label = out.labels["targets"][0]
+    c0, r0, c1, r1 = label["bbox"]
+    rows, cols_ = np.unravel_index(np.argsort(image, axis=None)[-10:], image.shape)
+    assert np.all((c0 <= cols_) & (cols_ < c1) & (r0 <= rows) & (rows < r1))
+    # the label's centre is where the target is: inside its box, near the mask centroid
+    cx, cy = label["pixel_centre"]
+    assert c0 <= cx < c1 and r0 <= cy < r1
+    rr, cc = np.nonzero(mask == MASK_TARGET)
+    assert abs(cc.mean() - cx) < 3 and abs(rr.mean() - cy) < 3
+
+
+def test_target_moves_with_its_label(renderer64):
+    """Image convention: range to the right (x -> column), along-track down (y -> row)."""
+    left_up = renderer64.render(one_cylinder(x=-1.5, y=-1.5, yaw=0))
+    right_down = renderer64.render(one_cylinder(x=0.5, y=1.5, yaw=0))
+    for out in (left_up, right_down):
+        rr, cc = np.nonzero(out.mask == MASK_TARGET)
+        cx, cy = out.labels["targets"][0]["pixel_centre"]
+        assert abs(cc.mean() - cx) < 2 and abs(rr.mean() - cy) < 2
+    assert left_up.labels["targets"][0]["pixel_centre"][0] < 20 < right_down.labels["targets"][0]["pixel_centre"][0]
+
+
+def test_burial_hides_the_target(renderer64):
+    shallow = renderer64.render(one_cylinder(burial=0.0))
+    deep = renderer64.render(one_cylinder(burial=0.5))
+    # 0.5 m of a 0.6 m cylinder buried: the exposed chord is 0.44 m wide instead of 0.6 m
+    assert (deep.mask == MASK_TARGET).sum() < 0.85 * (shallow.mask == MASK_TARGET).sum()
+    assert (deep.mask == MASK_SHADOW).sum() < 0.25 * (shallow.mask == MASK_SHADOW).sum()
+
+
+def test_other_shapes_and_mesh_file(tmp_path, renderer64):
+    import trimesh
+
+    trimesh.creation.box(extents=[1.0, 0.6, 0.5]).export(tmp_path / "box.obj")
+    preset = Preset.from_dict({"targets": [{"shape": "sphere", "x": -1.5, "y": -1.5, "radius": 0.4},
+                                           {"shape": "cone", "x": -1.5, "y": 1.5, "length": 0.8, "radius": 0.5},
+                                           {"shape": "mesh", "mesh": "box.obj", "x": 0.0, "y": 0.0, "yaw": 20}],
+                               "post": {"speckle_looks": 0.0, "noise_std": 0.0}}, path=tmp_path / "p.toml")
+    out = renderer64.render(preset.sample(0, 0))
+    for label in out.labels["targets"]:
+        assert label["visible_pixels"] > 5 and label["shadow_pixels"] > 5, label["shape"]
+
+
+def test_speckle_and_noise_are_seeded(renderer64):
+    noisy = one_cylinder(speckle_looks=4.0, noise_std=0.05)
+    a, b = renderer64.render(noisy), renderer64.render(noisy)
+    quiet = renderer64.render(one_cylinder())
+    assert np.abs(a.image - b.image).max() <= 1 / 255
+    floor = quiet.mask == 0
+    assert a.image[floor].std() > 2 * quiet.image[floor].std()
+
+
+def test_golden_32px():
+    """32x32 render of a fixed scene against tests/golden/cylinder_32.npy (made by tests/make_golden.py)."""
+    from make_golden import golden_image
+
+    assert_matches_golden("cylinder_32", golden_image(), mean_tol=0.01, max_tol=0.12)
+
+
+def test_wrong_llvm_library_is_one_line(tmp_path):
+    env = {**os.environ, "DRJIT_LIBLLVM_PATH": "/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1"}
+    proc = subprocess.run([sys.executable, "-m", "sasmi.cli", "render", str(REPO / "scenes" / "cylinder_chip.toml"),
+                           "--out", str(tmp_path / "o"), "--count", "1", "--size", "32"],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "apt-get install libllvm19" in lines[0]

@@ -1,0 +1,126 @@
+"""Presets: validation errors name the field; sampling depends only on (seed, index)."""
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from sasmi.cli import main
+from sasmi.errors import SasmiError
+from sasmi.scene import Preset, load_preset
+
+from conftest import REPO
+
+BASE = """
+[sonar]
+chip_size = 6.0
+[[targets]]
+shape = "cylinder"
+"""
+
+
+def write(tmp_path, text: str):
+    path = tmp_path / "p.toml"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+@pytest.mark.parametrize("text, field", [
+    ("[sonar]\nfoo = 1\n", "sonar.foo: unknown key"),
+    ("[sonr]\n", "sonr: unknown section"),
+    ('[sonar]\nemitters = "many"\n', "sonar.emitters: expected int"),
+    ("[sonar]\nchip_size = 0\n", "sonar.chip_size: 0.0 is not allowed (allowed: > 0)"),
+    ("[sonar]\nmax_range = -5\n", "sonar.max_range"),
+    ("[sonar]\nemitters = 0\n", "sonar.emitters: 0 is not allowed"),
+    ("[[targets]]\nx = 4.0\n", "targets[0].x: 4 m lies outside the chip"),
+    ("[[targets]]\nradius = 0.3\nburial = 0.7\n", "targets[0].burial"),
+    ("[[targets]]\nburial = {uniform = [0.0, 0.9]}\nradius = 0.3\n", None),  # only some draws are too deep
+    ("[seafloor]\nalbedo = {uniform = [0.5, 0.2]}\n", "seafloor.albedo.uniform: lower bound"),
+    ("[seafloor]\nalbedo = {gauss = [0.5, 0.2]}\n", "seafloor.albedo: a distribution is one of"),
+    ("[seafloor]\nalbedo = 1.5\n", "seafloor.albedo: 1.5 is not allowed (allowed: in [0, 1])"),
+    ('[[targets]]\nshape = "torus"\n', "targets[0].shape: 'torus' is not allowed"),
+    ('[[targets]]\nshape = "mesh"\n', "targets[0].mesh: a file path is required"),
+    ("[sonar]\nnear_range = 58.0\n", "sonar.near_range: chip far edge"),
+])
+def test_bad_preset_names_the_field(tmp_path, text, field):
+    path = write(tmp_path, text)
+    if field is None:  # a distribution reaching an invalid value fails on the draw that reaches it
+        preset = Preset.from_dict({"targets": [{"burial": {"uniform": [0.0, 0.9]}, "radius": 0.3}]})
+        with pytest.raises(SasmiError, match=r"targets\[0\].burial"):
+            for i in range(50):
+                preset.sample(0, i)
+        return
+    with pytest.raises(SasmiError) as e:
+        load_preset(path)
+    assert field in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_missing_and_broken_preset(tmp_path):
+    with pytest.raises(SasmiError, match="preset not found"):
+        load_preset(tmp_path / "nope.toml")
+    with pytest.raises(SasmiError, match="not valid TOML"):
+        load_preset(write(tmp_path, "[sonar\n"))
+
+
+def test_sampling_depends_only_on_seed_and_index():
+    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    a = [preset.sample(3, i) for i in range(5)]
+    assert preset.sample(3, 4) == a[4]  # scene 4 alone equals scene 4 after 0..3
+    assert len({s.targets[0].yaw for s in a}) == 5  # distributions really vary
+    assert preset.sample(4, 0) != a[0]
+    for s in a:
+        assert 30.0 <= s.sonar.near_range <= 50.0
+        assert 0.0 <= s.targets[0].burial <= 0.25
+
+
+def test_choice_and_integer_uniform():
+    preset = Preset.from_dict({"seafloor": {"rocks": {"uniform": [0, 4]}},
+                               "targets": [{"shape": {"choice": ["sphere", "cone"]}}]})
+    scenes = [preset.sample(0, i) for i in range(40)]
+    assert {s.targets[0].shape for s in scenes} == {"sphere", "cone"}
+    assert all(isinstance(s.seafloor.rocks, int) and 0 <= s.seafloor.rocks <= 4 for s in scenes)
+
+
+def test_target_grid_covers_the_field():
+    scene = load_preset(REPO / "scenes" / "target_field.toml").sample(0, 0)
+    assert len(scene.targets) == 144
+    xs = sorted({round(t.x) for t in scene.targets})
+    assert xs[0] < -25 and xs[-1] > 25
+    assert len({t.yaw for t in scene.targets}) == 144
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--size", "40"], "--size: 40 is not allowed (allowed: a positive multiple of 16)"),
+    (["--size", "0"], "--size: 0 is not allowed"),
+    (["--count", "0"], "--count: 0 is not allowed"),
+    (["--spp", "-1"], "--spp: -1 is not allowed"),
+])
+def test_cli_bad_flags_exit_2_and_write_nothing(tmp_path, capsys, args, message):
+    out = tmp_path / "out"
+    code = main(["render", str(REPO / "scenes" / "cylinder_chip.toml"), "--out", str(out), *args])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert message in err and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+def test_cli_bad_preset_exit_2_and_write_nothing(tmp_path, capsys):
+    out = tmp_path / "out"
+    bad = write(tmp_path, "[[targets]]\nradius = 0.3\nburial = 0.6\n")
+    assert main(["render", str(bad), "--out", str(out), "--size", "32"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("sasmi render: error: targets[0].burial") and len(err.splitlines()) == 1
+    assert not out.exists()
+    assert main(["render", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
+    assert "missing.toml: preset not found" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_cli_missing_mesh_exit_2(tmp_path, capsys):
+    preset = write(tmp_path, '[[targets]]\nshape = "mesh"\nmesh = "nothere.obj"\n')
+    out = tmp_path / "out"
+    assert main(["render", str(preset), "--out", str(out), "--size", "32", "--count", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "targets[0].mesh" in err and "nothere.obj" in err and len(err.splitlines()) == 1
+    assert not (out / "images").exists()
