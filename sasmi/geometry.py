@@ -166,11 +166,10 @@ def exposure(positions: np.ndarray) -> float:
 def flat_floor_irradiance(positions: np.ndarray, size: int) -> np.ndarray:
     """(size, size) sum of cos(theta) / d^2 over the emitters for a flat floor at pixel centres."""
     centres = (np.arange(size) + 0.5) / size * 2 - 1
-    x, y = np.meshgrid(centres, centres)
-    total = np.zeros_like(x)
+    total = np.zeros((size, size))
     for px, py, pz in positions:
-        d2 = (px - x) ** 2 + (py - y) ** 2 + pz**2
-        total += pz / np.sqrt(d2) / d2
+        d2 = ((px - centres) ** 2)[None, :] + ((py - centres) ** 2 + pz**2)[:, None]  # (rows = y, cols = x)
+        total += pz / (d2 * np.sqrt(d2))
     return total
 
 

@@ -19,15 +19,17 @@ def height_array(floor: Seafloor, chip_size: float, n: int, seed: int) -> np.nda
     heights = np.zeros_like(x)
 
     if floor.rms_height > 0:
-        k = 2 * np.pi * np.fft.fftfreq(n + 1, d=spacing)
+        # Filter on the n x n periodic grid (n is a multiple of 16: fast FFT sizes) and repeat the
+        # first row and column for the (n+1)-th vertices.
+        k = 2 * np.pi * np.fft.fftfreq(n, d=spacing)
         kx, ky = np.meshgrid(k, k)
         spectrum = (1 + (kx**2 + ky**2) * floor.correlation_length**2) ** (-floor.spectral_exponent / 2)
-        noise = np.fft.fft2(rng.standard_normal(x.shape))
+        noise = np.fft.fft2(rng.standard_normal((n, n)))
         rough = np.real(np.fft.ifft2(noise * np.sqrt(spectrum)))
         rough -= rough.mean()
         std = rough.std()
         if std > 0:
-            heights += rough * (floor.rms_height / std)
+            heights += np.pad(rough, ((0, 1), (0, 1)), mode="wrap") * (floor.rms_height / std)
 
     if floor.ripple_amplitude > 0:
         theta = np.deg2rad(floor.ripple_direction)

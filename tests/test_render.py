@@ -125,3 +125,35 @@ def test_wrong_llvm_library_is_one_line(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "apt-get install libllvm19" in lines[0]
+
+
+def test_next_scene_reuses_the_compiled_kernels():
+    import drjit as dr
+
+    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    renderer = Renderer(size=32, spp=4)
+    renderer.render(preset.sample(1, 0))
+    dr.kernel_history()  # drop what the first scene compiled
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        renderer.render(preset.sample(1, 1))  # new heightfield, pose, emitters: same structure
+        kernels = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert kernels and all(k["cache_hit"] for k in kernels)
+
+
+def test_two_workers_match_one(tmp_path, render_set):
+    from sasmi.cli import main
+
+    out = tmp_path / "two"
+    assert main(["render", str(REPO / "scenes" / "cylinder_chip.toml"), "--out", str(out), "--count", "4",
+                 "--size", "32", "--spp", "4", "--workers", "2"]) == 0
+    from PIL import Image
+
+    for i in range(4):
+        name = f"{i:06d}.png"
+        a = np.asarray(Image.open(out / "images" / name), dtype=int)
+        b = np.asarray(Image.open(render_set / "images" / name), dtype=int)
+        assert np.abs(a - b).max() <= 1
+        assert np.array_equal(np.asarray(Image.open(out / "masks" / name)), np.asarray(Image.open(render_set / "masks" / name)))
