@@ -7,10 +7,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sasmi.commands import evaluate_cmd, render_cmd, train_cmd, translate_cmd
+from sasmi.commands import render_cmd
 from sasmi.errors import SasmiError
 
-COMMANDS = (render_cmd, train_cmd, translate_cmd, evaluate_cmd)
+COMMANDS = (render_cmd,)
 
 
 def build_parser() -> argparse.ArgumentParser:
