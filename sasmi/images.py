@@ -17,6 +17,8 @@ from PIL import Image
 from sasmi.errors import SasmiError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy")
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
 FORMATS = {"png": ".png", "tiff16": ".tiff", "npy": ".npy"}
 
 
@@ -29,6 +31,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; give the file the usual permissions
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
