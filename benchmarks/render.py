@@ -39,8 +39,8 @@ def per_image_ms(images: int, warmup: int, size: int, spp: int) -> list[float]:
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(warmup + images):
             start = time.perf_counter()
-            scene = preset.sample(0, i)
-            write_one(Path(tmp), i, 0, scene, renderer.render(scene), "png")
+            rendered = renderer.render(preset.sample(0, i))
+            write_one(Path(tmp), i, 0, rendered.image, rendered, "png")
             times.append((time.perf_counter() - start) * 1000)
     return times[warmup:]
 

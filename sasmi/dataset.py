@@ -12,11 +12,15 @@ files; rerunning the same command skips complete images and renders the rest.
 """
 from __future__ import annotations
 
+import itertools
 import json
 import multiprocessing as mp
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
 
 from tqdm import tqdm
 
@@ -69,8 +73,9 @@ def is_complete(out: Path, index: int, image_format: str) -> bool:
             and (out / "masks" / f"{_name(index)}.png").is_file())
 
 
-def write_one(out: Path, index: int, seed: int, scene: Scene, rendered, image_format: str) -> None:
-    write_gray(image_path(out, index, image_format), rendered.image)
+def write_one(out: Path, index: int, seed: int, image: np.ndarray, rendered, image_format: str) -> None:
+    """Write one chip; its labels file goes last and marks the chip complete."""
+    write_gray(image_path(out, index, image_format), image)
     write_mask(out / "masks" / f"{_name(index)}.png", rendered.mask)
     labels = {"index": index, "seed": seed, "image": f"images/{image_path(out, index, image_format).name}",
               "mask": f"masks/{_name(index)}.png", **rendered.labels}
@@ -90,18 +95,28 @@ def _init_worker(job: RenderJob, threads: int | None) -> None:
     _worker.update(job=job, renderer=renderer)
 
 
-def _render_index(index: int) -> int:
+def _render_index(index: int):
     job: RenderJob = _worker["job"]
-    scene = job.preset.sample(job.seed, index)
-    write_one(job.out, index, job.seed, scene, _worker["renderer"].render(scene), job.image_format)
-    return index
+    return index, _worker["renderer"].render(job.preset.sample(job.seed, index))
 
 
-def _check_run_record(job: RenderJob) -> None:
+def _rendered(job: RenderJob, todo: list[int]) -> Iterator[tuple[int, object]]:
+    """(index, Rendered) for every index in todo, in order; rendered here or by worker processes."""
+    if job.workers == 1 or len(todo) <= 1:
+        _init_worker(job, None)
+        yield from map(_render_index, todo)
+        return
+    threads = max(1, (os.cpu_count() or 1) // job.workers)
+    ctx = mp.get_context("spawn")  # Dr.Jit's thread pool does not survive fork
+    with ctx.Pool(job.workers, initializer=_init_worker, initargs=(job, threads)) as pool:
+        yield from pool.imap(_render_index, todo)
+
+
+def _check_run_record(job: RenderJob, identity: dict) -> None:
     from sasmi.mitsuba_render import versions
 
     run_json = job.out / "run.json"
-    record = job.run_record()
+    record = {**job.run_record(), **identity}
     if run_json.is_file():
         try:
             previous = json.loads(run_json.read_text())
@@ -115,31 +130,36 @@ def _check_run_record(job: RenderJob) -> None:
                                      "sasmi": __version__, **versions()}, indent=2))
 
 
-def render_set(job: RenderJob, progress: bool = True) -> Path:
-    """Render scenes 0..count-1 of the preset into job.out; returns job.out."""
-    job = job.validate()
+Transform = Callable[[np.ndarray], np.ndarray]  # (B, H, W) in [0, 1] -> (B, H, W) in [0, 1]
+
+
+def render_set(job: RenderJob, transform: Transform | None = None, identity: dict | None = None,
+               batch: int = 16, progress: bool = True) -> Path:
+    """Render scenes 0..count-1 of the preset into job.out; returns job.out.
+
+    `transform` (e.g. a GAN generator) maps each batch of rendered images before they are
+    written; masks and labels are the render's. `identity` joins the run record, so a
+    resumed run must use the same transform (e.g. the same generator checkpoint).
+    """
     from sasmi.geometry import check_targets
 
+    job = job.validate()
     for index in range(job.count):  # every scene is drawn and checked before anything is written
         check_targets(job.preset.sample(job.seed, index))
-    _check_run_record(job)
+    _check_run_record(job, identity or {})
     for stale in job.out.glob("*/.*.tmp*"):  # temp files of a killed run; their targets were never renamed
         stale.unlink()
     todo = [i for i in range(job.count) if not is_complete(job.out, i, job.image_format)]
-    bar = tqdm(total=job.count, initial=job.count - len(todo), unit="img", desc="render", disable=not progress,
-               dynamic_ncols=True)
-    with bar:
-        if job.workers == 1 or len(todo) <= 1:
-            _init_worker(job, None)
-            for index in todo:
-                _render_index(index)
-                bar.update()
-        else:
-            threads = max(1, (os.cpu_count() or 1) // job.workers)
-            ctx = mp.get_context("spawn")  # Dr.Jit's thread pool does not survive fork
-            with ctx.Pool(job.workers, initializer=_init_worker, initargs=(job, threads)) as pool:
-                for _ in pool.imap_unordered(_render_index, todo):
-                    bar.update()
+    with tqdm(total=job.count, initial=job.count - len(todo), unit="img", desc="render", disable=not progress,
+              dynamic_ncols=True) as bar:
+        stream = _rendered(job, todo)
+        while chunk := list(itertools.islice(stream, batch if transform else 1)):
+            images = np.stack([rendered.image for _, rendered in chunk])  # (B, H, W) in [0, 1]
+            if transform is not None:
+                images = transform(images)
+            for (index, rendered), image in zip(chunk, images):
+                write_one(job.out, index, job.seed, image, rendered, job.image_format)
+            bar.update(len(chunk))
     assemble_labels(job.out, job.count)
     return job.out
 

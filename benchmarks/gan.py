@@ -1,0 +1,103 @@
+"""GAN speed: generator inference ms/image at 256² (batch 1 and 16) and training steps/s.
+
+    .venv/bin/python benchmarks/gan.py                       # CPU, and CUDA when present
+    .venv/bin/python benchmarks/gan.py --presets small paper --train-size 128 --train-steps 20
+
+Training steps/s come from the real training functions on a temporary folder of random
+images, timed as the difference between an N+2-step and a 2-step run, so start-up
+(reading data, TensorBoard) is excluded; one SAS GAN or DCGAN step is n_critic = 5
+critic updates and one generator update. The paper preset at 256² on a CPU takes
+minutes; it runs on CUDA by default and on the CPU only when asked for.
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gan import train
+from gan.critic import CRITIC_PRESETS
+from gan.dcgan import DCGAN_PRESETS
+from gan.generator import GENERATOR_PRESETS, Generator
+from sasmi.images import write_gray
+
+
+def sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+@torch.no_grad()
+def inference_ms(preset: str, device: torch.device, batch: int, size: int = 256, repeats: int = 3) -> float:
+    generator = Generator(GENERATOR_PRESETS[preset]).to(device).eval()
+    x = torch.rand(batch, 1, size, size, device=device) * 2 - 1
+    generator(x)  # warm-up (allocations, cuDNN autotuning)
+    sync(device)
+    start = time.perf_counter()
+    for _ in range(repeats):
+        generator(x)
+    sync(device)
+    return (time.perf_counter() - start) / repeats / batch * 1000
+
+
+def training_steps_per_s(kind: str, preset: str, device: torch.device, size: int, steps: int, data: Path) -> float:
+    def run(n: int) -> float:
+        cfg = replace(train.RUN_KINDS[kind](), steps=n, size=size, sample_every=10 ** 9, checkpoint_every=10 ** 9)
+        if kind == "sasgan":
+            cfg = replace(cfg, generator=GENERATOR_PRESETS[preset], critic=CRITIC_PRESETS[preset])
+        if kind == "dcgan":
+            cfg = replace(cfg, dcgan=DCGAN_PRESETS[preset], critic=CRITIC_PRESETS[preset], final_samples=1)
+        out = Path(tempfile.mkdtemp(dir=data))
+        start = time.perf_counter()
+        if kind == "autoencoder":
+            train.train_autoencoder(cfg, out, data / "real", device)
+        elif kind == "sasgan":
+            train.train_sasgan(cfg, out, data / "real", data / "renders", data / f"ae{size}", device)
+        else:
+            train.train_dcgan(cfg, out, data / "real", device)
+        sync(device)
+        return time.perf_counter() - start
+
+    return steps / (run(steps + 2) - run(2))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--devices", nargs="+", help="default: cpu, and cuda when present")
+    parser.add_argument("--presets", nargs="+", choices=sorted(GENERATOR_PRESETS),
+                        help="generator presets (default: small on CPU, small and paper on CUDA)")
+    parser.add_argument("--train-size", type=int, default=128, help="training image size (default 128, the chips)")
+    parser.add_argument("--train-steps", type=int, default=10, help="timed training steps per kind (default 10)")
+    args = parser.parse_args()
+    devices = args.devices or ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp)
+        rng = np.random.default_rng(0)
+        for i in range(16):
+            write_gray(data / "real" / f"{i}.png", rng.random((args.train_size, args.train_size)))
+            write_gray(data / "renders" / "images" / f"{i}.png", rng.random((args.train_size, args.train_size)))
+        ae_cfg = replace(train.AutoencoderRun(), steps=1, size=args.train_size)
+        train.train_autoencoder(ae_cfg, data / f"ae{args.train_size}", data / "real", torch.device("cpu"))
+
+        print(f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads")
+        for name in devices:
+            device = torch.device(name)
+            label = torch.cuda.get_device_name(device) if device.type == "cuda" else "CPU"
+            for preset in args.presets or (["small"] if device.type == "cpu" else ["small", "paper"]):
+                for batch in (1, 16):
+                    ms = inference_ms(preset, device, batch)
+                    print(f"{label:>12}  generator {preset:<5} 256² batch {batch:>2}: {ms:8.2f} ms/image")
+                for kind in ("autoencoder", "sasgan", "dcgan")[preset != "small":]:  # the autoencoder has no preset
+                    rate = training_steps_per_s(kind, preset, device, args.train_size, args.train_steps, data)
+                    print(f"{label:>12}  train {kind:<11} {preset:<5} {args.train_size}² batch "
+                          f"{train.RUN_KINDS[kind]().batch}: {rate:6.2f} steps/s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,62 @@
+"""The SAS GAN generator: render → realistic-looking SAS image (Johnson et al. 2016 style).
+
+7×7 conv, two stride-2 convs down, `blocks` residual blocks at 4×width channels, two
+[nearest ×2 → 3×3 conv] stages up (transposed convs leave checkerboard patterns that a
+critic learns to see), 7×7 conv, tanh. Instance norm, as in CycleGAN's version of the
+same net: batches of 4 are too small for batch statistics. Reflection padding keeps the
+borders free of a dark frame. Fully convolutional: any size that is a multiple of 4.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn as nn
+
+
+@dataclass(frozen=True)
+class GeneratorConfig:
+    width: int = 16  # channels after the first conv; 2× and 4× after the two downsamplings
+    blocks: int = 4  # residual blocks; each adds receptive field at 1/4 resolution
+
+
+# `small` runs at a few steps/s on a laptop CPU at 128²; `paper` is the 256² Johnson/CycleGAN
+# configuration (64 wide, 9 blocks) that Reed et al.'s "Johnson et al. style" net refers to.
+GENERATOR_PRESETS = {"small": GeneratorConfig(16, 4), "paper": GeneratorConfig(64, 9)}
+
+
+def _conv_norm_relu(c_in: int, c_out: int, kernel: int, stride: int = 1) -> list[nn.Module]:
+    return [nn.Conv2d(c_in, c_out, kernel, stride, padding=kernel // 2, padding_mode="reflect"),
+            nn.InstanceNorm2d(c_out, affine=True), nn.ReLU()]
+
+
+class ResidualBlock(nn.Module):
+    def __init__(self, c: int):
+        super().__init__()
+        self.body = nn.Sequential(*_conv_norm_relu(c, c, 3),
+                                  nn.Conv2d(c, c, 3, padding=1, padding_mode="reflect"),
+                                  nn.InstanceNorm2d(c, affine=True))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.body(x)
+
+
+class Generator(nn.Module):
+    def __init__(self, cfg: GeneratorConfig):
+        super().__init__()
+        w = cfg.width
+        self.net = nn.Sequential(
+            *_conv_norm_relu(1, w, 7),
+            *_conv_norm_relu(w, 2 * w, 3, stride=2),
+            *_conv_norm_relu(2 * w, 4 * w, 3, stride=2),
+            *[ResidualBlock(4 * w) for _ in range(cfg.blocks)],
+            nn.Upsample(scale_factor=2, mode="nearest"), *_conv_norm_relu(4 * w, 2 * w, 3),
+            nn.Upsample(scale_factor=2, mode="nearest"), *_conv_norm_relu(2 * w, w, 3),
+            nn.Conv2d(w, 1, 7, padding=3, padding_mode="reflect"),
+            nn.Tanh(),
+        )
+
+    def forward(self, render: torch.Tensor) -> torch.Tensor:
+        # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]
+        assert render.ndim == 4 and render.shape[1] == 1 and render.shape[-1] % 4 == 0, render.shape
+        return self.net(render)

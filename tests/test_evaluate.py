@@ -1,0 +1,122 @@
+"""Metrics with known answers: FID, KID, precision/recall, nearest neighbours (pure numpy, fast)."""
+import numpy as np
+import pytest
+import scipy.linalg
+
+from sasmi import evaluate as ev
+
+
+def exact_gaussian(rng, n, mean, cov):
+    """n samples whose sample mean and covariance (ddof 1) are exactly `mean` and `cov`."""
+    d = len(mean)
+    z = rng.standard_normal((n, d))
+    z -= z.mean(0)
+    white = np.linalg.solve(np.linalg.cholesky(z.T @ z / (n - 1)), z.T).T  # sample covariance = I
+    return white @ np.linalg.cholesky(cov).T + mean
+
+
+def closed_form_fid(mu1, s1, mu2, s2):
+    """The textbook formula with a general (complex-capable) sqrtm: an independent reference."""
+    root1 = scipy.linalg.sqrtm(s1)
+    cross = scipy.linalg.sqrtm(root1 @ s2 @ root1)
+    return float(np.sum((mu1 - mu2) ** 2) + np.trace(s1) + np.trace(s2) - 2 * np.trace(cross).real)
+
+
+def random_cov(rng, d):
+    a = rng.standard_normal((d, d))
+    return a @ a.T / d + 0.1 * np.eye(d)
+
+
+def test_fid_of_a_set_with_itself_is_zero():
+    rng = np.random.default_rng(0)
+    for n, d in ((200, 16), (20, 64)):  # N > D and rank-deficient N < D
+        x = rng.standard_normal((n, d)) * rng.uniform(0.1, 10, d)
+        assert ev.fid(x, x) == pytest.approx(0.0, abs=1e-8 * np.trace(np.cov(x.T)))
+
+
+def test_fid_matches_closed_form_for_gaussians():
+    rng = np.random.default_rng(1)
+    d = 8
+    # 1-D: (μ1 − μ2)² + (σ1 − σ2)²
+    a, b = exact_gaussian(rng, 300, np.array([1.0]), np.array([[4.0]])), exact_gaussian(rng, 500, np.array([-2.0]), np.array([[0.25]]))
+    assert ev.fid(a, b) == pytest.approx(9.0 + (2.0 - 0.5) ** 2, abs=1e-6)
+    # commuting (diagonal) covariances: ‖Δμ‖² + Σ (√λa − √λb)²
+    la, lb = rng.uniform(0.1, 5, d), rng.uniform(0.1, 5, d)
+    mu_a, mu_b = rng.standard_normal(d), rng.standard_normal(d)
+    a, b = exact_gaussian(rng, 400, mu_a, np.diag(la)), exact_gaussian(rng, 250, mu_b, np.diag(lb))
+    expected = np.sum((mu_a - mu_b) ** 2) + np.sum((np.sqrt(la) - np.sqrt(lb)) ** 2)
+    assert ev.fid(a, b) == pytest.approx(expected, abs=1e-6)
+    # general, non-commuting covariances, against scipy's sqrtm
+    sa, sb = random_cov(rng, d), random_cov(rng, d)
+    a, b = exact_gaussian(rng, 300, mu_a, sa), exact_gaussian(rng, 300, mu_b, sb)
+    assert ev.fid(a, b) == pytest.approx(closed_form_fid(mu_a, sa, mu_b, sb), abs=1e-6)
+
+
+def test_fid_rank_deficient_matches_full_eigen_route():
+    # N < D: the N×N route must equal the textbook D×D formula with symmetric square roots
+    rng = np.random.default_rng(2)
+    a, b = rng.standard_normal((30, 80)) + 0.3, 2 * rng.standard_normal((40, 80))
+
+    def sym_sqrt(s):
+        w, v = np.linalg.eigh(s)
+        return (v * np.sqrt(np.clip(w, 0, None))) @ v.T
+
+    sa, sb = np.cov(a.T), np.cov(b.T)
+    root = sym_sqrt(sa)
+    expected = np.sum((a.mean(0) - b.mean(0)) ** 2) + np.trace(sa) + np.trace(sb) - 2 * np.trace(sym_sqrt(root @ sb @ root))
+    # the D×D reference itself carries √(round-off) from ~50 zero eigenvalues, hence 1e-7
+    assert ev.fid(a, b) == pytest.approx(expected, rel=1e-7)
+    # exact check: FID is invariant under an isometric embedding of 5-d sets (N > D) into 80-d (N < D)
+    small_a, small_b = rng.standard_normal((30, 5)), rng.standard_normal((40, 5)) * 1.5 + 0.2
+    q = np.linalg.qr(rng.standard_normal((80, 5)))[0]  # (80, 5), orthonormal columns
+    assert ev.fid(small_a @ q.T, small_b @ q.T) == pytest.approx(ev.fid(small_a, small_b), rel=1e-9)
+
+
+def test_fid_bootstrap_and_real_split():
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((100, 4)), rng.standard_normal((100, 4)) + 1.0
+    est = ev.fid_bootstrap(a, b, n=30, seed=0)
+    assert est.value == pytest.approx(ev.fid(a, b))
+    assert 0 < est.std < est.value  # a clear shift of ‖Δμ‖² = 4 is far outside its own noise
+    ref = ev.fid_real_split(a, n=30, seed=0)
+    assert 0 < ref.value < 0.5 * est.value and ref.std > 0
+
+
+def test_kid_unbiased_near_zero_for_one_distribution_and_positive_when_shifted():
+    rng = np.random.default_rng(4)
+    a, b = rng.standard_normal((400, 16)), rng.standard_normal((400, 16))
+    same = ev.kid(a, b, subsets=50, subset_size=50, seed=0)
+    shifted = ev.kid(a, b + 0.5, subsets=50, subset_size=50, seed=0)
+    assert abs(same.value) < 3 * same.std / np.sqrt(50) + 1e-3  # zero within its standard error
+    assert shifted.value > 10 * max(shifted.std / np.sqrt(50), abs(same.value))
+    # unbiased at tiny sizes too, where FID is dominated by its bias
+    tiny = np.mean([ev.mmd2_unbiased(rng.standard_normal((10, 16)), rng.standard_normal((10, 16)))
+                    for _ in range(400)])
+    assert abs(tiny) < 0.02
+
+
+def test_precision_recall():
+    rng = np.random.default_rng(5)
+    real = rng.standard_normal((300, 2))
+    p, r = ev.precision_recall(real, rng.standard_normal((300, 2)), k=3)
+    assert p > 0.85 and r > 0.85
+    collapsed = 0.05 * rng.standard_normal((300, 2))  # mode collapse: realistic but not diverse
+    p, r = ev.precision_recall(real, collapsed, k=3)
+    assert p > 0.95 and r < 0.3
+    p, r = ev.precision_recall(real, rng.standard_normal((300, 2)) + 20, k=3)
+    assert p == 0 and r == 0
+
+
+def test_nearest_and_copy_statistics():
+    rng = np.random.default_rng(6)
+    real = rng.standard_normal((50, 8))
+    idx, dist = ev.nearest(real[:5] + 1e-6, real, k=2)
+    assert list(idx[:, 0]) == [0, 1, 2, 3, 4] and np.all(dist[:, 0] < 1e-5)
+    idx, _ = ev.nearest(real, real, k=1, exclude_self=True)
+    assert np.all(idx[:, 0] != np.arange(50))
+    real_nn = ev.nearest(real, real, 1, exclude_self=True)[1][:, 0]
+    copies = ev.nearest(real[:20] + 1e-3 * rng.standard_normal((20, 8)), real, 1)[1][:, 0]
+    fresh = ev.nearest(rng.standard_normal((20, 8)), real, 1)[1][:, 0]
+    assert ev.copy_statistics(copies, real_nn)["fraction_below"] == 1.0
+    stats = ev.copy_statistics(fresh, real_nn)
+    assert stats["fraction_below"] < 0.3 and 0.5 < stats["median_ratio"] < 2.0

@@ -1,0 +1,241 @@
+"""`sasmi evaluate` end to end: a tiny trained φ run, synthetic sets with known answers,
+target preservation, pose sweeps, and bad input."""
+import json
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+from gan import train
+from gan.autoencoder import AutoencoderConfig, load_encoder
+from sasmi import cli, sweeps
+from sasmi import evaluate as ev
+from sasmi.errors import SasmiError
+from sasmi.images import write_gray, write_mask
+from sasmi.scene import Scene, Sonar, Target
+
+CPU = torch.device("cpu")
+TINY_AE = train.AutoencoderRun(steps=3, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
+                               log_every=1, sample_every=10, checkpoint_every=10)
+SIZE = 48  # written at 48 px, read at the encoder's 32: the resize path is exercised too
+
+
+def chip(rng, col: float, row: float, speckle: bool = True, target: bool = True):
+    """(image, mask, label): a 4×5 px bright target centred at (col, row), its 12 px shadow to the right."""
+    image = 0.35 * (rng.gamma(4.0, 0.25, (SIZE, SIZE)) if speckle else 1.0 + 0.05 * rng.standard_normal((SIZE, SIZE)))
+    mask = np.zeros((SIZE, SIZE), np.uint8)
+    c0, r0 = int(col - 1.5), int(row - 2)
+    if target:
+        mask[r0:r0 + 5, c0 + 4:c0 + 16] = 2
+        mask[r0:r0 + 5, c0:c0 + 4] = 1
+        image[mask == 2] *= 0.1
+        image[mask == 1] = 0.95
+    label = {"x": 0.0, "y": 0.0, "yaw": 0.0, "burial": 0.0, "pixel_centre": [c0 + 1.5, r0 + 2.0],
+             "bbox": [c0, r0, c0 + 4, r0 + 5], "shadow_bbox": [c0 + 4, r0, c0 + 16, r0 + 5]}
+    return np.clip(image, 0, 1), mask, label
+
+
+def write_set(folder: Path, n: int, seed: int, labelled: bool = False, shift: int = 0, **kw) -> Path:
+    """A plain folder of chips, or a render set (images/, masks/, labels.jsonl); `shift` moves
+    the image content right by that many px but not its mask and labels (a translation that
+    misplaces the target)."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for i in range(n):
+        image, mask, label = chip(rng, rng.uniform(12, 20), rng.uniform(14, 34), **kw)
+        image = np.roll(image, shift, axis=1)
+        write_gray(folder / ("images" if labelled else "") / f"{i:06d}.png", image)
+        if labelled:
+            write_mask(folder / "masks" / f"{i:06d}.png", mask)
+            lines.append(json.dumps({"index": i, "targets": [label], "size": SIZE}))
+    if labelled:
+        (folder / "labels.jsonl").write_text("\n".join(lines) + "\n")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("evaluate")
+    d = SimpleNamespace(
+        root=root,
+        real=write_set(root / "real", 24, seed=0),
+        renders=write_set(root / "renders", 12, seed=1, labelled=True, speckle=False),
+        shifted=write_set(root / "shifted", 12, seed=2, labelled=True, shift=5),
+        floor=write_set(root / "floor", 12, seed=3, target=False),
+    )
+    d.phi = train.train_autoencoder(TINY_AE, root / "ae", d.real, CPU)
+    return d
+
+
+def evaluate_cli(capsys, *args) -> tuple[int, str]:
+    rc = cli.main(["evaluate", *map(str, args)])
+    return rc, capsys.readouterr().err
+
+
+def test_report_from_a_trained_run(data, capsys):
+    out = data.root / "report"
+    rc, err = evaluate_cli(capsys, "--real", data.real, "--set", f"renders={data.renders}",
+                           "--set", f"shifted={data.shifted}", "--set", f"floor={data.floor}",
+                           "--phi", data.phi, "--out", out, "--bootstrap", 10, "--device", "cpu")
+    assert rc == 0, err
+    assert "fewer than φ's 1024 dimensions" in err  # 24 real images < 1024 φ dimensions
+
+    m = json.loads((out / "metrics.json").read_text())
+    assert list(m["realism"]) == ["real→real", "renders", "shifted", "floor"]
+    for name, row in m["realism"].items():
+        assert row["fid"] >= 0 and row["fid_std"] > 0, name
+        assert 0 <= row["precision"] <= 1 and 0 <= row["recall"] <= 1, name
+        assert math.isfinite(row["kid"]) and row["kid_std"] > 0, name
+    # "shifted" has the real chips' texture and targets; floor lacks targets, renders lack speckle
+    r = m["realism"]
+    for worse in ("floor", "renders"):
+        assert r[worse]["fid_ratio"] > r["shifted"]["fid_ratio"] and r[worse]["kid"] > r["shifted"]["kid"], worse
+    assert set(m["copying"]) == {"renders", "shifted", "floor"}
+    assert set(m["copying"]["floor"]) == {"pixel", "phi"}
+    assert any("fewer than" in w for w in m["warnings"])
+
+    # target preservation: the renders keep their labels; the 5 px shift shows as ≈ 5 px
+    tp = m["target_preservation"]
+    assert set(tp) == {"renders", "shifted"}  # floor has no masks/labels
+    assert tp["renders"]["centroid_error_px"] < 1.0 and tp["renders"]["shadow_iou"] > 0.6
+    assert tp["shifted"]["centroid_error_px"] == pytest.approx(5.0, abs=1.0)
+    assert tp["shifted"]["shadow_iou"] < 0.6 * tp["renders"]["shadow_iou"]
+    assert m["pose_sweep"] == {"skipped": "no --preset and --generator given"}
+
+    report = (out / "report.md").read_text()
+    for text in ("## Realism in φ space", "| real→real | 12 + 12 |", "| renders | 12 |", "## Copying detector",
+                 "## t-SNE of φ", "## Target preservation", "Skipped (no masks/ and labels.jsonl): floor",
+                 "## Pose sweeps", "Skipped: no --preset"):
+        assert text in report, text
+    for figure in ("tsne.png", "nearest_distances.png", "neighbours_renders.png", "neighbours_floor.png",
+                   "preservation_renders.png", "preservation_shifted.png"):
+        assert (out / figure).stat().st_size > 1000, figure
+        assert f"]({figure})" in report, figure
+
+
+def test_phi_features_from_paths_and_arrays_agree(data):
+    encoder = load_encoder(data.phi)
+    paths = ev.list_images(data.real)[:5]
+    from_paths = ev.phi_features(encoder, paths, batch=2)
+    from_arrays = ev.phi_features(encoder, np.stack([ev.read_gray(p) for p in paths]), batch=3)
+    assert from_paths.shape == (5, 1024) and from_paths.dtype == np.float64
+    np.testing.assert_allclose(from_paths, from_arrays, rtol=1e-5, atol=1e-6)
+    assert ev.phi_fid(data.real, data.real, encoder) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("case", ["missing real", "no equals", "empty name", "missing set dir", "twice", "reserved",
+                                  "preset alone", "phi not a folder", "phi not a run", "too few real"])
+def test_bad_input_exits_2_with_one_line(data, capsys, case):
+    good = {"--real": data.real, "--set": f"a={data.floor}", "--phi": data.phi, "--out": data.root / "bad"}
+    extra = []
+    if case == "missing real":
+        good["--real"] = data.root / "nope"
+    elif case == "no equals":
+        good["--set"] = str(data.floor)
+    elif case == "empty name":
+        good["--set"] = f"={data.floor}"
+    elif case == "missing set dir":
+        good["--set"] = f"a={data.root / 'nope'}"
+    elif case == "twice":
+        extra = ["--set", f"a={data.renders}"]
+    elif case == "reserved":
+        good["--set"] = f"real={data.floor}"
+    elif case == "preset alone":
+        extra = ["--preset", "scenes/cylinder_chip.toml"]
+    elif case == "phi not a folder":
+        good["--phi"] = data.root / "nope"
+    elif case == "phi not a run":
+        good["--phi"] = data.floor
+    elif case == "too few real":
+        good["--real"] = write_set(data.root / "three", 3, seed=9)
+    rc, err = evaluate_cli(capsys, *[str(v) for kv in good.items() for v in kv], *extra)
+    assert rc == 2
+    assert err.startswith("sasmi evaluate: error: ") and err.count("\n") == 1, err
+
+
+def test_measure_image_known_answers():
+    rng = np.random.default_rng(0)
+    image, mask, label = chip(rng, 20.0, 24.0)
+    m = sweeps.measure_image(image, mask, [label])
+    assert m["shadow_iou"] > 0.7 and m["centroid_errors"][0] < 0.7 and m["target_contrast"] > 1.5
+    shifted = sweeps.measure_image(np.roll(image, (3, 4), axis=(0, 1)), mask, [label])
+    assert shifted["centroid_errors"][0] == pytest.approx(5.0, abs=0.7)
+    erased = sweeps.measure_image(chip(rng, 20.0, 24.0, target=False)[0], mask, [label])
+    assert erased["shadow_iou"] < 0.1 and erased["target_contrast"] < 1.3
+    s = sweeps.summarise([m, erased])
+    assert s["images"] == 2 and s["targets"] == 2
+
+
+def test_preservation_of_a_resized_translation(tmp_path):
+    # a translation written at twice the render size: masks and labels are rescaled to it
+    small = write_set(tmp_path / "small", 4, seed=5, labelled=True)
+    big = tmp_path / "big"
+    for path in sorted((small / "images").iterdir()):
+        image = ev.read_gray(path)
+        write_gray(big / "images" / path.name, np.kron(image, np.ones((2, 2))))
+    (big / "masks").symlink_to(small / "masks")
+    (big / "labels.jsonl").symlink_to(small / "labels.jsonl")
+    report = sweeps.target_preservation({"small": small, "big": big}, tmp_path / "out")
+    tp = report.metrics["target_preservation"]
+    assert tp["big"]["centroid_error_px"] < 1.5 and tp["big"]["shadow_iou"] > 0.7
+    assert tp["small"]["centroid_error_px"] < 1.0
+
+
+class FakeRender:
+    """Stand-in renderer at 48 px: a 4×5 px target at the scene's first target, its shadow to the right."""
+
+    def __call__(self, scene):
+        half = scene.sonar.chip_size / 2
+        t = scene.targets[0]
+        col, row = ((t.x + half) / scene.sonar.chip_size * SIZE - 0.5, (t.y + half) / scene.sonar.chip_size * SIZE - 0.5)
+        image, mask, label = chip(np.random.default_rng(int(t.yaw)), col, row)
+        return SimpleNamespace(image=image.astype(np.float32), mask=mask, labels={"targets": [label]})
+
+
+def test_pose_sweep_with_stand_in_renderer(tmp_path):
+    scene = Scene(sonar=Sonar(chip_size=6.0), targets=(Target(x=-1.0, yaw=30.0), Target(x=1.0)))
+    cfg = sweeps.SweepConfig(steps=4)
+    moved, turned = sweeps.pose_scenes(scene, cfg)
+    assert [len(s.targets) for s in moved + turned] == [1] * 8
+    assert [t.targets[0].x for t in moved] == pytest.approx([-1.5, -0.5, 0.5, 1.5])
+    assert [t.targets[0].y for t in moved] == pytest.approx([-1.5, -0.5, 0.5, 1.5])
+    assert [t.targets[0].yaw for t in turned] == pytest.approx([0, 60, 120, 180])
+
+    kept = sweeps.pose_sweep(scene, FakeRender(), lambda images: images, tmp_path, cfg).metrics["pose_sweep"]
+    moved_out = sweeps.pose_sweep(scene, FakeRender(), lambda images: np.roll(images, 4, axis=2), tmp_path / "shift",
+                                  cfg).metrics["pose_sweep"]
+    for pose, shifted in zip(kept["translation"] + kept["rotation"], moved_out["translation"] + moved_out["rotation"]):
+        assert pose["translated"] == pose["render"]  # identity translation keeps every number
+        assert shifted["translated"]["centroid_error_px"] == pytest.approx(4.0, abs=0.7)
+    assert (tmp_path / "sweep_translation.png").is_file() and (tmp_path / "sweep_rotation.png").is_file()
+
+
+def test_pose_sweep_needs_a_target():
+    with pytest.raises(SasmiError, match="no target"):
+        sweeps.pose_scenes(Scene())
+
+
+def test_preservation_on_the_renderer_output(render_set, tmp_path):
+    # the label conventions (pixel_centre, bbox, mask values) as the real renderer writes them
+    tp = sweeps.target_preservation({"renders": render_set}, tmp_path).metrics["target_preservation"]["renders"]
+    assert tp["images"] == 8 and tp["lost"] < 0.25
+    assert tp["centroid_error_px"] < 4.0 and tp["shadow_iou"] > 0.4
+
+
+@pytest.mark.slow
+def test_pose_sweep_through_mitsuba_and_a_trained_generator(data, tmp_path):
+    from gan.critic import CriticConfig
+    from gan.generator import GeneratorConfig
+
+    cfg = train.SasganRun(steps=1, size=32, batch=2, n_critic=1, generator=GeneratorConfig(4, 1),
+                          critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)
+    generator = train.train_sasgan(cfg, tmp_path / "gan", data.real, data.renders, data.phi, CPU)
+    preset = Path(__file__).resolve().parents[1] / "scenes" / "cylinder_chip.toml"
+    report = sweeps.pose_sweep_from_runs(preset, generator, tmp_path, sweeps.SweepConfig(steps=3, spp=4))
+    sweep = report.metrics["pose_sweep"]
+    assert len(sweep["translation"]) == 3 and len(sweep["rotation"]) == 3
+    assert all(p["render"]["centroid_error_px"] < 4.0 for p in sweep["translation"])
+    assert (tmp_path / "sweep_rotation.png").is_file()

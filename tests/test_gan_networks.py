@@ -1,0 +1,80 @@
+"""Shapes and value ranges of the GAN networks at test sizes (32 and 64 px)."""
+import pytest
+import torch
+
+from gan.autoencoder import PHI_DIM, Autoencoder, AutoencoderConfig
+from gan.critic import Critic, CriticConfig
+from gan.dcgan import DCGANConfig, DCGANGenerator, sample
+from gan.generator import GENERATOR_PRESETS, Generator, GeneratorConfig
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    # tiny tensors on a shared 2-core machine: more torch threads only wait on each other
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(autouse=True)
+def _seed():
+    torch.manual_seed(0)
+
+
+@pytest.mark.parametrize("size", [32, 64])
+def test_autoencoder_phi_is_1024_at_any_size(size):
+    ae = Autoencoder(AutoencoderConfig())
+    x = torch.rand(3, 1, size, size) * 2 - 1
+    phi = ae.encoder(x)
+    assert phi.shape == (3, PHI_DIM)
+    assert (phi >= 0).all()  # ReLU features
+    y = ae(x)
+    assert y.shape == x.shape and y.abs().max() <= 1
+
+
+def test_autoencoder_phi_is_the_flattened_last_stage_at_128():
+    ae = Autoencoder(AutoencoderConfig())
+    x = torch.rand(1, 1, 128, 128) * 2 - 1
+    assert torch.equal(ae.encoder(x), ae.encoder.stages(x).flatten(1))
+
+
+def test_autoencoder_widths_must_give_1024():
+    with pytest.raises(ValueError):
+        AutoencoderConfig(widths=(8, 8, 8, 8))
+
+
+@pytest.mark.parametrize("size", [32, 64])
+def test_generator_keeps_shape_and_range(size):
+    g = Generator(GeneratorConfig(width=8, blocks=2))
+    x = torch.rand(2, 1, size, size) * 2 - 1
+    y = g(x)
+    assert y.shape == x.shape
+    assert y.min() >= -1 and y.max() <= 1
+
+
+def test_generator_presets_differ_only_in_size():
+    small, paper = (sum(p.numel() for p in Generator(GENERATOR_PRESETS[k]).parameters()) for k in ("small", "paper"))
+    assert small < paper / 10
+
+
+@pytest.mark.parametrize("size", [32, 64])
+def test_critic_scores_one_number_per_image_without_batch_norm(size):
+    critic = Critic(CriticConfig(width=8), size)
+    assert not any(isinstance(m, torch.nn.modules.batchnorm._BatchNorm) for m in critic.modules())
+    scores = critic(torch.rand(5, 1, size, size) * 2 - 1)
+    assert scores.shape == (5,)
+    # per-sample: a sample's score does not depend on the rest of the batch
+    x = torch.rand(4, 1, size, size)
+    assert torch.allclose(critic(x)[:1], critic(x[:1]), atol=1e-6)
+
+
+@pytest.mark.parametrize("size", [32, 64])
+def test_dcgan_generator_and_sample(size):
+    g = DCGANGenerator(DCGANConfig(z_dim=16, width=8), size)
+    y = g(torch.randn(3, 16))
+    assert y.shape == (3, 1, size, size) and y.abs().max() <= 1
+    a, b = sample(g, 5, seed=1, batch=2), sample(g, 5, seed=1)
+    assert a.shape == (5, size, size) and a.dtype.name == "float32"
+    assert a.min() >= 0 and a.max() <= 1
+    assert abs(a - b).max() < 1e-5  # same seed, same images, whatever the batch

@@ -1,0 +1,209 @@
+"""Training runs at 32 px on the CPU: checkpoints, samples, exact resume, NaN stop, loading, translate."""
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from gan import train
+from gan.autoencoder import Autoencoder, AutoencoderConfig, load_encoder
+from gan.critic import CriticConfig
+from gan.data import ImageSet
+from gan.dcgan import DCGANConfig, sample
+from gan.generator import GeneratorConfig
+from gan.losses import reconstruction_loss
+from gan.translate import translate, translate_folder
+from sasmi.errors import SasmiError
+from sasmi.images import read_gray, write_gray, write_mask
+
+CPU = torch.device("cpu")
+TINY_AE = train.AutoencoderRun(steps=4, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
+                               log_every=1, sample_every=10, checkpoint_every=10)
+TINY_SASGAN = train.SasganRun(steps=20, size=32, batch=2, n_critic=2, generator=GeneratorConfig(4, 1),
+                              critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)
+TINY_DCGAN = train.DcganRun(steps=20, size=32, batch=2, n_critic=2, dcgan=DCGANConfig(8, 4), critic=CriticConfig(4),
+                            final_samples=3, log_every=1, sample_every=10, checkpoint_every=10)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    # tiny tensors on a shared 2-core machine: more torch threads only wait on each other
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def make_render_set(folder: Path, n: int = 6, size: int = 48, seed: int = 0) -> Path:
+    """A render set as `sasmi render` writes it: seafloor, a bright target, its shadow to the right."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:size, :size]
+    labels = []
+    for i in range(n):
+        cy, cx, r = rng.uniform(0.3, 0.7) * size, rng.uniform(0.3, 0.5) * size, 0.1 * size
+        image = np.clip(0.35 + 0.05 * rng.standard_normal((size, size)), 0, 1)
+        target = (yy - cy) ** 2 + (xx - cx) ** 2 < r ** 2
+        shadow = (abs(yy - cy) < r) & (xx > cx + r) & (xx < cx + 4 * r)
+        image[shadow], image[target] = 0.05, 0.9
+        mask = np.zeros((size, size), np.uint8)
+        mask[target], mask[shadow] = 1, 2
+        write_gray(folder / "images" / f"{i:06d}.png", image)
+        write_mask(folder / "masks" / f"{i:06d}.png", mask)
+        labels.append(json.dumps({"image": f"{i:06d}.png", "target": "cylinder", "cx": cx, "cy": cy}))
+    (folder / "labels.jsonl").write_text("\n".join(labels) + "\n")
+    (folder / "run.json").write_text("{}\n")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def chips(real_chips):
+    return real_chips  # tests/conftest.py: skips when the shared chips are absent
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory):
+    return make_render_set(tmp_path_factory.mktemp("renders"))
+
+
+@pytest.fixture(scope="module")
+def ae_run(tmp_path_factory, chips):
+    return train.train_autoencoder(TINY_AE, tmp_path_factory.mktemp("runs") / "ae", chips, CPU)
+
+
+def _tensors(state, prefix=""):
+    """Flatten a checkpoint into {path: tensor or number}."""
+    if isinstance(state, dict):
+        return {k: v for key, sub in state.items() for k, v in _tensors(sub, f"{prefix}/{key}").items()}
+    if isinstance(state, (list, tuple)):
+        return {k: v for i, sub in enumerate(state) for k, v in _tensors(sub, f"{prefix}/{i}").items()}
+    return {prefix: state}
+
+
+def test_autoencoder_overfits_a_batch_of_8(chips):
+    torch.manual_seed(0)
+    images = ImageSet(chips / "targets", 32)
+    x = images.center(list(range(8)))  # (8, 1, 32, 32) in [-1, 1]
+    model = Autoencoder(AutoencoderConfig())
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    losses = []
+    for _ in range(80):
+        loss = reconstruction_loss(model(x), x)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert losses[-1] < losses[0] / 10, (losses[0], losses[-1])
+
+
+def test_sasgan_run_writes_checkpoints_samples_and_log(tmp_path, chips, renders, ae_run):
+    out = train.train_sasgan(TINY_SASGAN, tmp_path / "sasgan", chips, renders, ae_run, CPU)
+    assert json.loads((out / "config.json").read_text())["config"]["phi_margin"] == TINY_SASGAN.phi_margin
+    assert sorted(p.name for p in (out / "samples").iterdir()) == ["step_000010.png", "step_000020.png"]
+    assert read_gray(out / "samples" / "step_000020.png").shape == (2 * 34 + 2, 6 * 34 + 2)  # renders | outputs
+    assert list((out / "tb").glob("events.out.tfevents.*"))
+    for which in ("last", "best"):
+        ckpt = torch.load(out / "checkpoints" / f"{which}.pt", weights_only=True)
+        assert set(ckpt["state"]) == {"generator", "critic", "opt_g", "opt_c", "real", "renders", "noise"}
+    assert torch.load(out / "checkpoints" / "last.pt", weights_only=True)["step"] == 20
+    assert not list(out.rglob("*.tmp*"))  # atomic writes left nothing behind
+
+    generator = train.load_generator(out)
+    assert generator.image_size == 32 and not generator.training
+    y = generator(torch.rand(3, 1, 32, 32) * 2 - 1)
+    assert y.shape == (3, 1, 32, 32) and y.abs().max() <= 1
+
+
+@pytest.mark.parametrize("kind", ["autoencoder", "sasgan", "dcgan"])
+def test_ten_steps_resume_ten_steps_equals_twenty(tmp_path, chips, renders, ae_run, kind):
+    def run(cfg, out, resume=False):
+        if kind == "autoencoder":
+            return train.train_autoencoder(cfg, out, chips, CPU, resume)
+        if kind == "sasgan":
+            return train.train_sasgan(cfg, out, chips, renders, ae_run, CPU, resume)
+        return train.train_dcgan(cfg, out, chips, CPU, resume)
+
+    cfg = replace({"autoencoder": TINY_AE, "sasgan": TINY_SASGAN, "dcgan": TINY_DCGAN}[kind], steps=20,
+                  checkpoint_every=100, sample_every=100)
+    run(cfg, tmp_path / "straight")
+    run(replace(cfg, steps=10), tmp_path / "split")
+    resumed = train.resolve_config(kind, tmp_path / "split", {"steps": 20}, resume=True)
+    run(resumed, tmp_path / "split", resume=True)
+
+    a = _tensors(torch.load(tmp_path / "straight" / "checkpoints" / "last.pt", weights_only=True))
+    b = _tensors(torch.load(tmp_path / "split" / "checkpoints" / "last.pt", weights_only=True))
+    assert a.keys() == b.keys() and a["/step"] == b["/step"] == 20
+    same = {k: torch.equal(a[k], b[k]) if torch.is_tensor(a[k]) else a[k] == b[k] for k in a}
+    different = [k for k, ok in same.items() if not ok and k != "/best"]  # best differs: split runs checkpoint at 10
+    assert not different
+
+
+def test_non_finite_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, chips, monkeypatch):
+    calls = []
+
+    def poisoned(reconstruction, target):
+        calls.append(1)
+        loss = reconstruction_loss(reconstruction, target)
+        return loss * float("nan") if len(calls) == 7 else loss
+
+    monkeypatch.setattr(train, "reconstruction_loss", poisoned)
+    cfg = replace(TINY_AE, steps=20, checkpoint_every=5)
+    with pytest.raises(SasmiError, match=r"step 7: non-finite loss/reconstruction = nan.*last good state \(step 5\)"):
+        train.train_autoencoder(cfg, tmp_path / "ae", chips, CPU)
+    ckpt = torch.load(tmp_path / "ae" / "checkpoints" / "last.pt", weights_only=True)
+    assert ckpt["step"] == 5
+    assert all(torch.isfinite(v).all() for v in ckpt["state"]["autoencoder"].values())
+
+
+def test_resume_refuses_changed_settings_and_fresh_runs_refuse_old_folders(tmp_path, chips):
+    out = train.train_autoencoder(TINY_AE, tmp_path / "ae", chips, CPU)
+    with pytest.raises(SasmiError, match="size=64"):
+        train.resolve_config("autoencoder", out, {"size": 64, "steps": 8}, resume=True)
+    with pytest.raises(SasmiError, match="already holds a run"):
+        train.resolve_config("autoencoder", out, {}, resume=False)
+    with pytest.raises(SasmiError, match="is a 'autoencoder' run"):
+        train.resolve_config("sasgan", out, {}, resume=True)
+    with pytest.raises(SasmiError, match="nothing to resume"):
+        train.resolve_config("autoencoder", tmp_path / "new", {}, resume=True)
+
+
+def test_load_encoder(ae_run):
+    encoder = load_encoder(ae_run)
+    assert encoder.image_size == 32 and not encoder.training
+    assert encoder(torch.zeros(2, 1, 32, 32)).shape == (2, 1024)
+
+
+def test_dcgan_run_writes_final_samples_and_loads(tmp_path, chips):
+    out = train.train_dcgan(replace(TINY_DCGAN, steps=2), tmp_path / "dcgan", chips, CPU)
+    assert len(list((out / "final_samples").glob("*.png"))) == 3
+    generator = train.load_dcgan(out)
+    assert generator.image_size == 32
+    images = sample(generator, 5, seed=3)
+    assert images.shape == (5, 32, 32) and 0 <= images.min() and images.max() <= 1
+
+
+@pytest.fixture(scope="module")
+def generator(tmp_path_factory, chips, renders, ae_run):
+    out = train.train_sasgan(replace(TINY_SASGAN, steps=2), tmp_path_factory.mktemp("runs") / "g", chips, renders,
+                             ae_run, CPU)
+    return train.load_generator(out)
+
+
+def test_translate_resizes_in_and_out(generator):
+    images = np.random.default_rng(0).random((5, 48, 40))
+    out = translate(generator, images, batch=2)
+    assert out.shape == (5, 48, 40) and out.dtype == np.float32
+    assert 0 <= out.min() and out.max() <= 1
+    np.testing.assert_allclose(translate(generator, images[:1]), out[:1], atol=1e-5)  # batching does not matter
+
+
+def test_translate_folder_carries_render_set_labels(tmp_path, generator, renders):
+    n = translate_folder(generator, renders, tmp_path / "out", batch=4)
+    assert n == 6
+    assert sorted(p.name for p in (tmp_path / "out" / "images").iterdir()) == [f"{i:06d}.png" for i in range(6)]
+    assert read_gray(tmp_path / "out" / "images" / "000000.png").shape == (48, 48)
+    assert (tmp_path / "out" / "labels.jsonl").read_text() == (renders / "labels.jsonl").read_text()
+    assert sorted(p.name for p in (tmp_path / "out" / "masks").iterdir()) == [f"{i:06d}.png" for i in range(6)]
+    with pytest.raises(SasmiError, match="outside the input"):
+        translate_folder(generator, renders, renders / "images" / "out")
