@@ -12,19 +12,23 @@ minutes; it runs on CUDA by default and on the CPU only when asked for.
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-import torch
+# run as a script, this file's folder comes first on sys.path and its name would shadow the gan package
+sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
-from gan import train
-from gan.critic import CRITIC_PRESETS
-from gan.dcgan import DCGAN_PRESETS
-from gan.generator import GENERATOR_PRESETS, Generator
-from sasmi.images import write_gray
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from gan import train  # noqa: E402
+from gan.critic import CRITIC_PRESETS  # noqa: E402
+from gan.dcgan import DCGAN_PRESETS  # noqa: E402
+from gan.generator import GENERATOR_PRESETS, Generator  # noqa: E402
+from sasmi.images import write_gray  # noqa: E402
 
 
 def sync(device: torch.device) -> None:

@@ -20,8 +20,8 @@ class GeneratorConfig:
     blocks: int = 4  # residual blocks; each adds receptive field at 1/4 resolution
 
 
-# `small` runs at a few steps/s on a laptop CPU at 128²; `paper` is the 256² Johnson/CycleGAN
-# configuration (64 wide, 9 blocks) that Reed et al.'s "Johnson et al. style" net refers to.
+# `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
+# (64 wide, 9 blocks); Reed et al.'s exact widths were not available to us.
 GENERATOR_PRESETS = {"small": GeneratorConfig(16, 4), "paper": GeneratorConfig(64, 9)}
 
 

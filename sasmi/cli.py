@@ -29,7 +29,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sasmi {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"sasmi {args.command}: interrupted (rerun the same command to resume)", file=sys.stderr)
+        print(f"sasmi {args.command}: interrupted; finished work is kept (render/generate: rerun the same command; "
+              "train: add --resume)", file=sys.stderr)
         return 130
 
 

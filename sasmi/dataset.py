@@ -27,7 +27,7 @@ from tqdm import tqdm
 from sasmi import __version__
 from sasmi.errors import SasmiError
 from sasmi.images import FORMATS, write_gray, write_mask, write_text
-from sasmi.scene import Preset, Scene
+from sasmi.scene import Preset
 
 
 @dataclass(frozen=True)

@@ -80,6 +80,22 @@ def versions() -> dict:
             "llvm": os.environ.get("DRJIT_LIBLLVM_PATH", "")}
 
 
+def aligned(a: np.ndarray, dtype=np.float32) -> np.ndarray:
+    """A flat copy of `a` on a 64-byte boundary, for handing to Dr.Jit.
+
+    Dr.Jit maps numpy memory without copying and compiles one kernel variant for aligned
+    and one for unaligned inputs, so arrays of random alignment would trigger random
+    recompiles (seconds each); aligned copies keep every scene on one cached kernel.
+    """
+    a = np.asarray(a, dtype=dtype).ravel()
+    items = 64 // a.itemsize
+    buffer = np.empty(a.size + items, dtype=dtype)
+    start = (-buffer.ctypes.data % 64) // a.itemsize
+    out = buffer[start:start + a.size]
+    out[:] = a
+    return out
+
+
 @dataclass(frozen=True)
 class Rendered:
     image: np.ndarray  # (H, W) float32 in [0, 1]
@@ -90,8 +106,8 @@ class Rendered:
 def _mi_mesh(mi, name: str, mesh: TriangleMesh):
     m = mi.Mesh(name, vertex_count=len(mesh.vertices), face_count=len(mesh.faces), has_vertex_normals=False)
     params = mi.traverse(m)
-    params["vertex_positions"] = mesh.vertices.ravel()
-    params["faces"] = mesh.faces.ravel()
+    params["vertex_positions"] = aligned(mesh.vertices)
+    params["faces"] = aligned(mesh.faces, np.uint32)
     params.update()
     return m
 
@@ -167,12 +183,12 @@ class Renderer:
 
     def _update(self, g: Geometry) -> None:
         p = self._params
-        p["floor.vertex_positions"] = g.floor.vertices.ravel()
+        p["floor.vertex_positions"] = aligned(g.floor.vertices)
         p["floor.bsdf.reflectance.value"] = g.floor.albedo
         for k, t in enumerate(g.targets):
-            p[f"target_{k}.vertex_positions"] = t.vertices.ravel()
+            p[f"target_{k}.vertex_positions"] = aligned(t.vertices)
             p[f"target_{k}.bsdf.reflectance.value"] = t.albedo
-            self._occluder_params[f"target_{k}.vertex_positions"] = t.vertices.ravel()
+            self._occluder_params[f"target_{k}.vertex_positions"] = aligned(t.vertices)
         if g.targets:
             self._occluder_params.update()
         for k, pos in enumerate(g.emitter_positions):
@@ -213,7 +229,7 @@ class Renderer:
         n = self.size
         centres = (np.arange(n) + 0.5) / n * 2 - 1
         xs, ys = np.meshgrid(centres, centres)
-        origin = mi.Point3f(xs.ravel(), ys.ravel(), np.full(n * n, CAMERA_HEIGHT, dtype=np.float32))
+        origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
         si = self._scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
         hit_ids = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64)
         visible = self._index_of(hit_ids, self._target_ids)
@@ -229,8 +245,10 @@ class Renderer:
             origins = np.tile(points, (len(emitters), 1))  # (K * C, 3), probe-major
             to_light = np.repeat(emitters, len(points), axis=0) - origins
             dist = np.linalg.norm(to_light, axis=1)
-            rays = mi.Ray3f(mi.Point3f(*origins.T), mi.Vector3f(*(to_light / dist[:, None]).T))
-            hits = self._occluders.ray_intersect(mi.Ray3f(rays, mi.Float(dist * (1 - 1e-4))))
+            directions = to_light / dist[:, None]
+            rays = mi.Ray3f(mi.Point3f(*(aligned(origins[:, i]) for i in range(3))),
+                            mi.Vector3f(*(aligned(directions[:, i]) for i in range(3))))
+            hits = self._occluders.ray_intersect(mi.Ray3f(rays, mi.Float(aligned(dist * (1 - 1e-4)))))
             blocker = self._index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64),
                                      self._occluder_ids)
             counts = np.zeros((len(g.targets) + 1, len(points)), dtype=np.int32)  # row 0: nothing in the way
@@ -413,9 +431,7 @@ class DifferentiableRenderer(Renderer):
         self._pixel_x, self._pixel_y = self._upload(x), self._upload(y)  # (H·W,) pixel centres, row-major
 
     def _upload(self, a: np.ndarray):
-        """A copy of `a` in Dr.Jit's own memory. mi.Float(ndarray) maps numpy's memory, whose
-        alignment varies between allocations, and each alignment compiles its own kernels."""
-        return self.mi.Float(np.asarray(a, dtype=np.float32).ravel().tolist())
+        return self.mi.Float(aligned(a))
 
     def _opaque(self, value: float):
         return self.dr.opaque(self.mi.Float, value)
@@ -464,7 +480,7 @@ class DifferentiableRenderer(Renderer):
     def gradient_image(self, bound: BoundScene, theta: np.ndarray, name: str, seed: int
                        ) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) image and its forward-mode derivative d image / d θ[name], both float32."""
-        mi, dr = self.mi, self.dr
+        dr = self.dr
         if name not in PARAMETERS:
             raise SasmiError(f"{name}: unknown parameter (allowed: {', '.join(PARAMETERS)})")
         theta_dr = self._upload(theta)

@@ -11,6 +11,17 @@ SHARED_CHIPS = REPO.parent / "shared" / "data" / "sonar-chips"
 FAILURES = REPO / "tests" / "_failures"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _torch_one_thread():
+    """Tiny tensors on a 2-core machine beside Dr.Jit's own threads: more torch threads only wait on each other."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 @pytest.fixture(scope="session")
 def real_chips() -> Path:
     if not SHARED_CHIPS.is_dir():

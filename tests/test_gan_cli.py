@@ -4,19 +4,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 from sasmi.cli import main
 from sasmi.images import write_gray
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # tiny tensors on a shared 2-core machine: more torch threads only wait on each other
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture

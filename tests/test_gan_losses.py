@@ -6,15 +6,6 @@ from gan.critic import Critic, CriticConfig
 from gan.losses import critic_loss, generator_loss, gradient_penalty, phi_loss, reconstruction_loss
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # tiny tensors on a shared 2-core machine: more torch threads only wait on each other
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def test_wasserstein_terms():
     real, fake = torch.tensor([2.0, 4.0]), torch.tensor([1.0, -1.0])
     assert critic_loss(real, fake) == -3.0  # −(mean real − mean fake)

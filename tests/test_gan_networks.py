@@ -8,15 +8,6 @@ from gan.dcgan import DCGANConfig, DCGANGenerator, sample
 from gan.generator import GENERATOR_PRESETS, Generator, GeneratorConfig
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # tiny tensors on a shared 2-core machine: more torch threads only wait on each other
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 @pytest.fixture(autouse=True)
 def _seed():
     torch.manual_seed(0)

@@ -27,15 +27,6 @@ TINY_DCGAN = train.DcganRun(steps=20, size=32, batch=2, n_critic=2, dcgan=DCGANC
                             final_samples=3, log_every=1, sample_every=10, checkpoint_every=10)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # tiny tensors on a shared 2-core machine: more torch threads only wait on each other
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def make_render_set(folder: Path, n: int = 6, size: int = 48, seed: int = 0) -> Path:
     """A render set as `sasmi render` writes it: seafloor, a bright target, its shadow to the right."""
     rng = np.random.default_rng(seed)
