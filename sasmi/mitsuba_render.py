@@ -212,10 +212,16 @@ class Renderer:
         return self._params
 
     # -- rendering ----------------------------------------------------------------------
+    def launch(self, seed: int):
+        """Start rendering the prepared scene; Dr.Jit runs it in its own threads until `collect`."""
+        return self.mi.render(self._scene, spp=self.spp, seed=seed % (2**31))
+
+    def collect(self, launched) -> np.ndarray:
+        """(H, W) float32 radiance of a launched render, exposure folded in (not clipped)."""
+        return np.asarray(launched, dtype=np.float32).reshape(self.size, self.size)
+
     def radiance(self, seed: int) -> np.ndarray:
-        """(H, W) float32 radiance of the prepared scene, exposure folded in (not clipped)."""
-        img = self.mi.render(self._scene, spp=self.spp, seed=seed % (2**31))
-        return np.asarray(img, dtype=np.float32).reshape(self.size, self.size)
+        return self.collect(self.launch(seed))
 
     def visibility(self, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
         """Per pixel: index of the visible target (-1 none) and of the target shadowing it (-1 none).
@@ -271,7 +277,9 @@ class Renderer:
     def render(self, scene: Scene) -> Rendered:
         g = build_geometry(scene, self.size)
         self.prepare(g)
-        image = postprocess(self.radiance(scene.seed), scene, g)
+        launched = self.launch(scene.seed)
+        maps = post_maps(scene, g)  # numpy work while the render runs
+        image = postprocess(self.collect(launched), maps)
         visible, owner = self.visibility(g)
         mask = np.full((self.size, self.size), MASK_SEAFLOOR, dtype=np.uint8)
         mask[owner >= 0] = MASK_SHADOW
@@ -309,7 +317,7 @@ def shadow_candidates(g: Geometry, points: np.ndarray) -> np.ndarray:
 
 
 def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) speckle and noise fields: the draws `postprocess` makes for `scene` (same generator, same order)."""
+    """(H, W) speckle and noise fields of `scene`, seeded by it (the differentiable render reuses them)."""
     post = scene.post
     rng = np.random.default_rng([scene.seed, 11])
     speckle = np.ones((size, size))
@@ -321,13 +329,16 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     return speckle, noise
 
 
-def postprocess(radiance: np.ndarray, scene: Scene, g: Geometry) -> np.ndarray:
-    """Time-varying gain, speckle (gamma, mean 1) and additive Gaussian noise seeded by the scene; clip to [0, 1]."""
-    image = radiance.astype(np.float64)
-    if scene.post.tvg:
-        image = image * tvg_gain(g.emitter_positions, g.size)
-    speckle, noise = post_fields(scene, g.size)
-    return np.clip(image * speckle + noise, 0.0, 1.0).astype(np.float32)
+def post_maps(scene: Scene, g: Geometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(H, W) time-varying gain (1 when off), speckle (gamma, mean 1) and additive noise of `scene`."""
+    gain = tvg_gain(g.emitter_positions, g.size) if scene.post.tvg else np.ones((g.size, g.size))
+    return (gain, *post_fields(scene, g.size))
+
+
+def postprocess(radiance: np.ndarray, maps: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """Radiance × gain × speckle + noise, clipped to [0, 1]."""
+    gain, speckle, noise = maps
+    return np.clip(radiance.astype(np.float64) * gain * speckle + noise, 0.0, 1.0).astype(np.float32)
 
 
 def _bbox(pixels: np.ndarray) -> list[int] | None:

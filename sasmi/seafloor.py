@@ -21,11 +21,10 @@ def height_array(floor: Seafloor, chip_size: float, n: int, seed: int) -> np.nda
     if floor.rms_height > 0:
         # Filter on the n x n periodic grid (n is a multiple of 16: fast FFT sizes) and repeat the
         # first row and column for the (n+1)-th vertices.
-        k = 2 * np.pi * np.fft.fftfreq(n, d=spacing)
-        kx, ky = np.meshgrid(k, k)
+        kx, ky = np.meshgrid(2 * np.pi * np.fft.rfftfreq(n, d=spacing), 2 * np.pi * np.fft.fftfreq(n, d=spacing))
         spectrum = (1 + (kx**2 + ky**2) * floor.correlation_length**2) ** (-floor.spectral_exponent / 2)
-        noise = np.fft.fft2(rng.standard_normal((n, n)))
-        rough = np.real(np.fft.ifft2(noise * np.sqrt(spectrum)))
+        noise = np.fft.rfft2(rng.standard_normal((n, n)))
+        rough = np.fft.irfft2(noise * np.sqrt(spectrum), s=(n, n))
         rough -= rough.mean()
         std = rough.std()
         if std > 0:
