@@ -170,8 +170,17 @@ def assemble_labels(out: Path, count: int) -> None:
 
 
 def read_labels(out: str | Path) -> list[dict]:
+    """The records of OUT/labels.jsonl; a malformed line is a SasmiError naming it."""
     path = Path(out) / "labels.jsonl"
     try:
-        return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    except (OSError, json.JSONDecodeError) as e:
+        lines = path.read_text().splitlines()
+    except OSError as e:
         raise SasmiError(f"{path}: cannot read labels ({e})") from None
+    records = []
+    for n, line in enumerate(lines, start=1):
+        if line.strip():
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                raise SasmiError(f"{path}:{n}: not JSON ({e})") from None
+    return records

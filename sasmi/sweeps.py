@@ -15,7 +15,6 @@ generator (imported inside it), so everything else runs without them.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ import numpy as np
 from PIL import Image
 from tqdm import tqdm
 
+from sasmi.dataset import read_labels as read_records
 from sasmi.errors import SasmiError
 from sasmi.evaluate import Report, Section, save_figure
 from sasmi.images import list_images, read_gray
@@ -143,16 +143,12 @@ def has_labels(folder: str | os.PathLike) -> bool:
 
 def read_labels(folder: str | os.PathLike) -> dict[int, list[dict]]:
     """labels.jsonl → {index: targets}; a malformed line is a SasmiError naming it."""
-    path = Path(folder) / "labels.jsonl"
     out = {}
-    for n, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
+    for n, record in enumerate(read_records(folder), start=1):
         try:
-            record = json.loads(line)
             out[int(record["index"])] = list(record["targets"])
         except (ValueError, KeyError, TypeError) as e:
-            raise SasmiError(f"{path}:{n}: not a label record with 'index' and 'targets' ({e})") from None
+            raise SasmiError(f"{Path(folder) / 'labels.jsonl'}: record {n} has no valid 'index' and 'targets' ({e})") from None
     return out
 
 
