@@ -1,0 +1,137 @@
+"""Typed label records of a render set: one writer (`ChipLabel.to_json`), one reader (`read_labels`).
+
+On disk (unchanged since the first render sets): `labels/NNNNNN.json`, one per chip and
+written last (it marks the chip complete), and `labels.jsonl`, all of them in index
+order. A record holds the sampled scene (`sonar`, `seafloor`, `post`, `seed`: the
+scene's own seed) and per target its sampled parameters plus what the render measured.
+Pixel coordinates are (col, row) = (x, y) of the image, boxes (col0, row0, col1, row1)
+with the end exclusive.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from sasmi.errors import SasmiError
+
+Box = tuple[float, float, float, float]
+
+# keys of a target record that the render measured; every other key is a sampled parameter
+_MEASURED = ("pixel_centre", "bbox", "shadow_bbox", "visible_pixels", "shadow_pixels")
+
+
+def _box(value: Any) -> Box | None:
+    return None if value is None else tuple(float(v) for v in value)
+
+
+def _finite(value: Any, where: str) -> Any:
+    """JSON has no NaN or Infinity: refuse them instead of writing a file other tools cannot read."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise SasmiError(f"{where}: {value} is not a finite number")
+    if isinstance(value, dict):
+        return {k: _finite(v, f"{where}.{k}") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    return value
+
+
+@dataclass(frozen=True)
+class TargetLabel:
+    """One target: its sampled parameters and where the render put it."""
+    params: dict  # shape, x, y (m from the chip centre), yaw (deg), burial (m), sizes, albedo, ...
+    pixel_centre: tuple[float, float]  # (col, row) of the target's centre, px
+    bbox: Box | None  # visible target pixels; None when the camera sees none of it
+    shadow_bbox: Box | None  # its acoustic shadow; None when it casts none on the chip
+    visible_pixels: int = 0
+    shadow_pixels: int = 0
+
+    @property
+    def shape(self) -> str:
+        return str(self.params.get("shape", ""))
+
+    def scaled(self, scale: float) -> "TargetLabel":
+        """The same label in the pixels of an image `scale` times as large (pixel centres stay centres)."""
+        def box(b: Box | None) -> Box | None:
+            return None if b is None else tuple(v * scale for v in b)
+
+        col, row = self.pixel_centre
+        return replace(self, pixel_centre=((col + 0.5) * scale - 0.5, (row + 0.5) * scale - 0.5),
+                       bbox=box(self.bbox), shadow_bbox=box(self.shadow_bbox))
+
+    def to_json(self) -> dict:
+        return {**self.params, "pixel_centre": list(self.pixel_centre),
+                "bbox": None if self.bbox is None else [int(v) if float(v).is_integer() else v for v in self.bbox],
+                "shadow_bbox": None if self.shadow_bbox is None
+                else [int(v) if float(v).is_integer() else v for v in self.shadow_bbox],
+                "visible_pixels": self.visible_pixels, "shadow_pixels": self.shadow_pixels}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "TargetLabel":
+        return cls(params={k: v for k, v in d.items() if k not in _MEASURED},
+                   pixel_centre=tuple(float(v) for v in d["pixel_centre"]),
+                   bbox=_box(d.get("bbox")), shadow_bbox=_box(d.get("shadow_bbox")),
+                   visible_pixels=int(d.get("visible_pixels", 0)), shadow_pixels=int(d.get("shadow_pixels", 0)))
+
+
+@dataclass(frozen=True)
+class ChipLabel:
+    """Everything known about one chip of a render set."""
+    index: int
+    size: int  # image side, px
+    scene: dict  # sonar, seafloor, post (sampled parameters) and seed (the scene's own)
+    targets: tuple[TargetLabel, ...] = ()
+    image: str = ""  # path of the image, relative to the render set
+    mask: str = ""  # path of the class mask, relative to the render set
+    extra: dict = field(default_factory=dict)  # keys this version does not know, kept on rewrite
+
+    def to_json(self) -> dict:
+        record = {"index": self.index, "image": self.image, "mask": self.mask, **self.scene,
+                  "targets": [t.to_json() for t in self.targets], "size": self.size, **self.extra}
+        return _finite(record, f"labels[{self.index}]")
+
+    def dumps(self) -> str:
+        return json.dumps(self.to_json(), allow_nan=False)
+
+    @classmethod
+    def from_json(cls, d: dict) -> "ChipLabel":
+        scene_keys = ("sonar", "seafloor", "post", "seed")
+        known = ("index", "image", "mask", "targets", "size", *scene_keys)
+        return cls(index=int(d["index"]), size=int(d["size"]),
+                   scene={k: d[k] for k in scene_keys if k in d},
+                   targets=tuple(TargetLabel.from_json(t) for t in d.get("targets", ())),
+                   image=str(d.get("image", "")), mask=str(d.get("mask", "")),
+                   extra={k: v for k, v in d.items() if k not in known})
+
+
+def has_labels(folder: str | os.PathLike) -> bool:
+    """True for a render set (or its translation): masks/ and labels.jsonl beside the images."""
+    folder = Path(folder)
+    return (folder / "masks").is_dir() and (folder / "labels.jsonl").is_file()
+
+
+def read_labels(folder: str | os.PathLike) -> list[ChipLabel]:
+    """Every record of FOLDER/labels.jsonl in file order; a malformed one is a SasmiError naming its line."""
+    path = Path(folder) / "labels.jsonl"
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as e:
+        raise SasmiError(f"{path}: cannot read labels ({e.strerror or e})") from None
+    records = []
+    for n, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            records.append(ChipLabel.from_json(json.loads(line)))
+        except json.JSONDecodeError as e:
+            raise SasmiError(f"{path}:{n}: not JSON ({e.msg})") from None
+        except (KeyError, TypeError, ValueError) as e:
+            raise SasmiError(f"{path}:{n}: not a chip label (missing or wrong {e})") from None
+    return records
+
+
+def labels_by_index(folder: str | os.PathLike) -> dict[int, ChipLabel]:
+    return {label.index: label for label in read_labels(folder)}
