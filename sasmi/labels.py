@@ -53,6 +53,13 @@ class TargetLabel:
     def shape(self) -> str:
         return str(self.params.get("shape", ""))
 
+    @property
+    def category(self) -> str:
+        """The class name an ATR model learns: the shape, or a mesh file's stem."""
+        if self.shape == "mesh" and self.params.get("mesh"):
+            return Path(str(self.params["mesh"])).stem
+        return self.shape
+
     def scaled(self, scale: float) -> "TargetLabel":
         """The same label in the pixels of an image `scale` times as large (pixel centres stay centres)."""
         def box(b: Box | None) -> Box | None:
@@ -105,6 +112,28 @@ class ChipLabel:
                    targets=tuple(TargetLabel.from_json(t) for t in d.get("targets", ())),
                    image=str(d.get("image", "")), mask=str(d.get("mask", "")),
                    extra={k: v for k, v in d.items() if k not in known})
+
+
+BUILTIN_CATEGORIES = ("cylinder", "sphere", "cone", "box", "torus")
+
+
+def categories_of(labels: list[ChipLabel]) -> list[str]:
+    """Class names in id order (id = position + 1; 0 is the background): built-in shapes first, then meshes."""
+    found = {t.category for label in labels for t in label.targets}
+    return [c for c in BUILTIN_CATEGORIES] + sorted(found - set(BUILTIN_CATEGORIES))
+
+
+def target_geometry(sonar: dict, x: float, y: float) -> dict:
+    """What ATR papers stratify by, for a target at (x, y) m from the chip centre.
+
+    Ground range is measured from the track; the array flies at `sonar.altitude` (or
+    max_range / 10 when a preset leaves it unset).
+    """
+    altitude = sonar.get("altitude") or sonar["max_range"] / 10.0
+    ground = sonar["near_range"] + sonar["chip_size"] / 2.0 + x
+    slant = math.hypot(ground, altitude)
+    return {"altitude": altitude, "ground_range": ground, "slant_range": slant,
+            "grazing_angle": math.degrees(math.atan2(altitude, ground)), "along_track": y}
 
 
 def has_labels(folder: str | os.PathLike) -> bool:
