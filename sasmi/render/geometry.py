@@ -15,8 +15,8 @@ from functools import lru_cache
 import numpy as np
 
 from sasmi.errors import SasmiError
+from sasmi.render.seafloor import height_array, height_at
 from sasmi.scene import Scene, Target
-from sasmi.seafloor import height_array, height_at
 
 CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (kernel reuse)
 SPHERE_SUBDIVISIONS = 3
@@ -171,11 +171,6 @@ def flat_floor_irradiance(positions: np.ndarray, size: int) -> np.ndarray:
         d2 = ((px - centres) ** 2)[None, :] + ((py - centres) ** 2 + pz**2)[:, None]  # (rows = y, cols = x)
         total += pz / (d2 * np.sqrt(d2))
     return total
-
-
-def tvg_gain(positions: np.ndarray, size: int) -> np.ndarray:
-    """(size, size) gain that makes a flat floor equally bright everywhere, 1 at the chip centre."""
-    return (math.pi / exposure(positions)) / flat_floor_irradiance(positions, size)
 
 
 def build_geometry(scene: Scene, size: int) -> Geometry:
