@@ -18,7 +18,7 @@ from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.mitsuba import load_scene, spot_to_world
 from sasmi.render.post import post_fields
-from sasmi.render.seafloor import height_array, height_at
+from sasmi.render.seafloor import surface
 from sasmi.scene import Scene
 
 if TYPE_CHECKING:
@@ -97,7 +97,7 @@ class DifferentiableRenderer:
     def bind(self, scene: Scene, speckle: bool = True) -> BoundScene:
         """Split `scene` for `image`; `speckle` keeps the scene's speckle and noise draws as fixed fields.
 
-        The relief is the heightfield without its rocks: `height_array` draws the rough
+        The relief is the seabed without its rocks: `seafloor.surface` draws the rough
         surface, then the ripple phase, then the rocks from one generator, so dropping the
         rocks leaves the first two draws and heights = relief + rocks exactly. Scaling
         `rms_height` and `ripple_amplitude` by r scales the relief by r (the rough part is
@@ -106,10 +106,10 @@ class DifferentiableRenderer:
         s = scene.sonar
         unit = 2.0 / s.chip_size  # chip units per metre
         g = build_geometry(scene, self.size)
-        relief = height_array(dataclasses.replace(scene.seafloor, rocks=0), s.chip_size, self.size, scene.seed)
+        relief = surface(dataclasses.replace(scene.seafloor, rocks=0), s.chip_size, scene.seed)
         floor_relief = np.zeros_like(g.floor.vertices)
-        floor_relief[:, 2] = relief.ravel() * unit
-        lifts = tuple(height_at(relief, s.chip_size, t.x, t.y) * unit for t in scene.targets)
+        floor_relief[:, 2] = relief.grid(self.size).ravel() * unit
+        lifts = tuple(float(relief.at(t.x, t.y)) * unit for t in scene.targets)
         fields = post_fields(scene, self.size) if speckle else (np.ones((self.size, self.size)),
                                                                 np.zeros((self.size, self.size)))
         mitsuba_scene = load_scene(self.mi, g, self.spp)
