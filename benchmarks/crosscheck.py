@@ -24,8 +24,8 @@ PRESET = REPO / "scenes" / "cylinder_chip.toml"
 
 
 def mitsuba_seconds(scene, size: int, spp: int) -> tuple[float, float]:
-    from sasmi.geometry import build_geometry
-    from sasmi.mitsuba_render import Renderer
+    from sasmi.render.geometry import build_geometry
+    from sasmi.render.mitsuba import Renderer
 
     g = build_geometry(scene, size)
     start = time.perf_counter()
@@ -42,8 +42,8 @@ def mitsuba_seconds(scene, size: int, spp: int) -> tuple[float, float]:
 
 
 def povray_seconds(scene, size: int) -> tuple[float, float]:
-    from sasmi import crosscheck, povray
-    from sasmi.geometry import build_geometry
+    from sasmi.render import crosscheck, povray
+    from sasmi.render.geometry import build_geometry
 
     g = build_geometry(scene, size)
     sdl = povray.geometry_sdl(g)
@@ -59,7 +59,7 @@ def main() -> None:
     ap.add_argument("--emitters", type=int, nargs="+", default=[1, 8, 32])
     args = ap.parse_args()
 
-    from sasmi import crosscheck, povray
+    from sasmi.render import crosscheck, povray
     from sasmi.scene import load_preset
 
     base = load_preset(PRESET).sample(0, 0)

@@ -30,7 +30,7 @@ sys.exit(code)
 
 def per_image_ms(images: int, warmup: int, size: int, spp: int) -> list[float]:
     from sasmi.dataset import write_one
-    from sasmi.mitsuba_render import Renderer
+    from sasmi.render.mitsuba import Renderer
     from sasmi.scene import load_preset
 
     preset = load_preset(PRESET)
@@ -40,7 +40,7 @@ def per_image_ms(images: int, warmup: int, size: int, spp: int) -> list[float]:
         for i in range(warmup + images):
             start = time.perf_counter()
             rendered = renderer.render(preset.sample(0, i))
-            write_one(Path(tmp), i, 0, rendered.image, rendered, "png")
+            write_one(Path(tmp), i, rendered.image, rendered, "png")
             times.append((time.perf_counter() - start) * 1000)
     return times[warmup:]
 

@@ -7,13 +7,7 @@
 __version__ = "0.1.0"
 
 from sasmi.scene import Scene, load_preset  # noqa: E402  (no renderer import: cheap)
-
-
-def render(scene: Scene, size: int = 256, spp: int = 16):
-    """Image (H, W) in [0, 1], mask (0 seafloor, 1 target, 2 shadow) and labels of one scene."""
-    from sasmi.mitsuba_render import render as mitsuba_render
-
-    return mitsuba_render(scene, size=size, spp=spp)
-
+# The package sasmi.render is callable: render(scene, size, spp). It imports Mitsuba on first use.
+from sasmi import render  # noqa: E402
 
 __all__ = ["Scene", "load_preset", "render", "__version__"]

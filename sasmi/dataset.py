@@ -16,9 +16,9 @@ import itertools
 import json
 import multiprocessing as mp
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 
@@ -27,7 +27,11 @@ from tqdm import tqdm
 from sasmi import __version__
 from sasmi.errors import SasmiError
 from sasmi.images import FORMATS, write_gray, write_mask, write_text
+from sasmi.preprocess import check_size
 from sasmi.scene import Preset
+
+if TYPE_CHECKING:
+    from sasmi.render.mitsuba import Rendered
 
 
 @dataclass(frozen=True)
@@ -44,8 +48,7 @@ class RenderJob:
     def validate(self) -> "RenderJob":
         if self.count <= 0:
             raise SasmiError(f"--count: {self.count} is not allowed (allowed: >= 1)")
-        if self.size <= 0 or self.size % 16:
-            raise SasmiError(f"--size: {self.size} is not allowed (allowed: a positive multiple of 16)")
+        check_size(self.size, "--size")
         if self.spp <= 0:
             raise SasmiError(f"--spp: {self.spp} is not allowed (allowed: >= 1)")
         if self.workers <= 0:
@@ -73,13 +76,13 @@ def is_complete(out: Path, index: int, image_format: str) -> bool:
             and (out / "masks" / f"{_name(index)}.png").is_file())
 
 
-def write_one(out: Path, index: int, seed: int, image: np.ndarray, rendered, image_format: str) -> None:
-    """Write one chip; its labels file goes last and marks the chip complete."""
+def write_one(out: Path, index: int, image: np.ndarray, rendered: Rendered, image_format: str) -> None:
+    """Write one chip (image (H, W) in [0, 1]); its labels file goes last and marks the chip complete."""
     write_gray(image_path(out, index, image_format), image)
     write_mask(out / "masks" / f"{_name(index)}.png", rendered.mask)
-    labels = {"index": index, "seed": seed, "image": f"images/{image_path(out, index, image_format).name}",
-              "mask": f"masks/{_name(index)}.png", **rendered.labels}
-    write_text(out / "labels" / f"{_name(index)}.json", json.dumps(labels))
+    label = replace(rendered.label, index=index, image=f"images/{image_path(out, index, image_format).name}",
+                    mask=f"masks/{_name(index)}.png")
+    write_text(out / "labels" / f"{_name(index)}.json", label.dumps())
 
 
 # -- worker process state (one Renderer per process, so the kernel compiles once) --------
@@ -87,7 +90,7 @@ _worker: dict = {}
 
 
 def _init_worker(job: RenderJob, threads: int | None) -> None:
-    from sasmi.mitsuba_render import Renderer
+    from sasmi.render.mitsuba import Renderer
 
     renderer = Renderer(size=job.size, spp=job.spp)
     if threads:
@@ -113,7 +116,7 @@ def _rendered(job: RenderJob, todo: list[int]) -> Iterator[tuple[int, object]]:
 
 
 def _check_run_record(job: RenderJob, identity: dict) -> None:
-    from sasmi.mitsuba_render import versions
+    from sasmi.render.llvm import versions
 
     run_json = job.out / "run.json"
     record = {**job.run_record(), **identity}
@@ -141,7 +144,7 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     written; masks and labels are the render's. `identity` joins the run record, so a
     resumed run must use the same transform (e.g. the same generator checkpoint).
     """
-    from sasmi.geometry import check_targets
+    from sasmi.render.geometry import check_targets
 
     job = job.validate()
     for index in range(job.count):  # every scene is drawn and checked before anything is written
@@ -158,7 +161,7 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
             if transform is not None:
                 images = transform(images)
             for (index, rendered), image in zip(chunk, images):
-                write_one(job.out, index, job.seed, image, rendered, job.image_format)
+                write_one(job.out, index, image, rendered, job.image_format)
             bar.update(len(chunk))
     assemble_labels(job.out, job.count)
     return job.out
@@ -168,19 +171,3 @@ def assemble_labels(out: Path, count: int) -> None:
     lines = [(out / "labels" / f"{_name(i)}.json").read_text().strip() for i in range(count)]
     write_text(out / "labels.jsonl", "\n".join(lines) + "\n")
 
-
-def read_labels(out: str | Path) -> list[dict]:
-    """The records of OUT/labels.jsonl; a malformed line is a SasmiError naming it."""
-    path = Path(out) / "labels.jsonl"
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as e:
-        raise SasmiError(f"{path}: cannot read labels ({e})") from None
-    records = []
-    for n, line in enumerate(lines, start=1):
-        if line.strip():
-            try:
-                records.append(json.loads(line))
-            except json.JSONDecodeError as e:
-                raise SasmiError(f"{path}:{n}: not JSON ({e})") from None
-    return records

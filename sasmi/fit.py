@@ -39,7 +39,8 @@ from tqdm import tqdm
 
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, write_text
-from sasmi.mitsuba_render import PARAMETERS
+from sasmi.preprocess import check_size
+from sasmi.render.differentiable import PARAMETERS
 from sasmi.scene import SECTIONS, Preset, Scene
 
 # preset fields each parameter scales: (section, key)
@@ -69,8 +70,8 @@ class FitConfig:
         for name, value, low in (("steps", self.steps, 1), ("scenes", self.scenes, 1), ("spp", self.spp, 1)):
             if value < low:
                 raise SasmiError(f"--{name}: {value} is not allowed (allowed: >= {low})")
-        if self.size is not None and (self.size <= 0 or self.size % 16):
-            raise SasmiError(f"--size: {self.size} is not allowed (allowed: a positive multiple of 16)")
+        if self.size is not None:
+            check_size(self.size, "--size")
         if not self.lr > 0:
             raise SasmiError(f"--lr: {self.lr} is not allowed (allowed: > 0)")
         return self
@@ -210,7 +211,7 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
     import torch
 
     from gan.losses import phi_loss
-    from sasmi.mitsuba_render import DifferentiableRenderer, scene_parameters
+    from sasmi.render.differentiable import DifferentiableRenderer, scene_parameters
 
     cfg = cfg.for_encoder(encoder).validate()
     scenes = [preset.sample(cfg.seed, i) for i in range(cfg.scenes)]
@@ -333,7 +334,7 @@ def fit_to_real(preset_path: str | os.PathLike, phi_run: str | os.PathLike, real
                 cfg: FitConfig, out: str | os.PathLike, progress: bool = True) -> Path:
     """One call: fit `cfg.params` of a preset so its renders match the real chips' mean φ; write OUT."""
     from gan.autoencoder import load_encoder
-    from sasmi.mitsuba_render import versions
+    from sasmi.render.llvm import versions
     from sasmi.scene import load_preset
 
     cfg.validate()

@@ -85,11 +85,6 @@ class Target:
     scale: float = _spec(1.0, _positive, "> 0", "scale applied to a mesh file")
     albedo: float = _spec(0.9, _unit, "in [0, 1]")
 
-    @property
-    def lying(self) -> bool:
-        """Cylinders lie on their side, as most seabed cylinders do; cones stand upright."""
-        return self.shape == "cylinder"
-
 
 @dataclass(frozen=True)
 class Post:
@@ -325,9 +320,3 @@ def load_preset(path: str | Path) -> Preset:
 def scene_to_dict(scene: Scene) -> dict:
     return dataclasses.asdict(scene)
 
-
-def scene_from_dict(d: dict) -> Scene:
-    """Inverse of scene_to_dict (used by labels and the differentiable fit)."""
-    return Scene(sonar=Sonar(**d["sonar"]), seafloor=Seafloor(**d["seafloor"]),
-                 targets=tuple(Target(**t) for t in d["targets"]), post=Post(**d["post"]),
-                 seed=int(d["seed"])).validate()

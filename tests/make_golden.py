@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sasmi.mitsuba_render import Renderer
+from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Post, Scene, Seafloor, Sonar, Target
 
 

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sasmi import crosscheck as xc
-from sasmi import povray
+from sasmi.render import crosscheck as xc
+from sasmi.render import povray
 from sasmi.cli import main
 from sasmi.errors import SasmiError
-from sasmi.geometry import build_geometry
-from sasmi.mitsuba_render import Renderer
+from sasmi.render.geometry import build_geometry
+from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Scene, Seafloor, Sonar, load_preset
 
 REPO = Path(__file__).resolve().parents[1]

@@ -12,7 +12,8 @@ from sasmi.cli import main
 from sasmi.errors import SasmiError
 from sasmi.fit import (FitConfig, central_difference, fit_scene, parse_params, preset_toml, scale_bounds,
                        scaled_preset)
-from sasmi.mitsuba_render import PARAMETERS, DifferentiableRenderer, Renderer, scene_parameters
+from sasmi.render.differentiable import PARAMETERS, DifferentiableRenderer, scene_parameters
+from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Preset, load_preset
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from sasmi.errors import SasmiError
-from sasmi.mitsuba_render import MASK_SHADOW, MASK_TARGET, Renderer
+from sasmi.render.annotate import MASK_SHADOW, MASK_TARGET
+from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Post, Preset, Scene, Sonar, Target, load_preset
 
 from conftest import REPO, assert_matches_golden
@@ -29,7 +30,7 @@ def one_cylinder(x=-0.5, y=0.0, yaw=30.0, burial=0.05, **post) -> Scene:
 
 
 def test_size_must_be_multiple_of_16():
-    with pytest.raises(SasmiError, match="size: 40"):
+    with pytest.raises(SasmiError, match="size 40: must be a positive multiple of 16"):
         Renderer(size=40)
 
 
@@ -157,3 +158,18 @@ def test_two_workers_match_one(tmp_path, render_set):
         b = np.asarray(Image.open(render_set / "images" / name), dtype=int)
         assert np.abs(a - b).max() <= 1
         assert np.array_equal(np.asarray(Image.open(out / "masks" / name)), np.asarray(Image.open(render_set / "masks" / name)))
+
+
+def test_one_call_api_reuses_one_renderer_per_size():
+    """`sasmi.render(scene)` renders and `sasmi.render` is still the package; renderers are cached per (size, spp)."""
+    import sasmi
+    import sasmi.render.mitsuba as mitsuba
+    from sasmi import render
+
+    assert render is sasmi.render and sasmi.render.Renderer is mitsuba.Renderer
+    scene = one_cylinder()
+    a = sasmi.render(scene, size=32, spp=4)
+    assert mitsuba.renderer_for(32, 4) is mitsuba.renderer_for(32, 4)
+    assert mitsuba.renderer_for(32, 4) is not mitsuba.renderer_for(48, 4)
+    assert np.abs(sasmi.render(scene, size=32, spp=4).image - a.image).max() <= 1 / 255
+    assert a.labels["targets"][0]["shadow_pixels"] == a.label.targets[0].shadow_pixels > 0

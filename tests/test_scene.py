@@ -91,8 +91,8 @@ def test_target_grid_covers_the_field():
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--size", "40"], "--size: 40 is not allowed (allowed: a positive multiple of 16)"),
-    (["--size", "0"], "--size: 0 is not allowed"),
+    (["--size", "40"], "--size 40: must be a positive multiple of 16"),
+    (["--size", "0"], "--size 0: must be a positive multiple of 16"),
     (["--count", "0"], "--count: 0 is not allowed"),
     (["--spp", "-1"], "--spp: -1 is not allowed"),
 ])

@@ -19,10 +19,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sasmi import povray
-    from sasmi.crosscheck import crosscheck, table, write
+    from sasmi.render import povray
+    from sasmi.render.crosscheck import crosscheck, table, write
     from sasmi.errors import SasmiError
-    from sasmi.mitsuba_render import versions
+    from sasmi.render.llvm import versions
     from sasmi.scene import load_preset
 
     if args.index < 0:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from sasmi.fit import FitConfig
-    from sasmi.mitsuba_render import PARAMETERS
+    from sasmi.render.differentiable import PARAMETERS
 
     defaults = FitConfig()
     p = sub.add_parser("fit-scene", help="fit scene parameters to real chips through the differentiable render",

@@ -39,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sasmi import povray
-from sasmi.geometry import build_geometry
+from sasmi.render import povray
+from sasmi.render.geometry import build_geometry
 from sasmi.images import write_gray, write_text
-from sasmi.mitsuba_render import Renderer
+from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Scene
 
 SPP = 256  # Mitsuba samples per pixel: two seeds against each other give r = 0.998

@@ -15,8 +15,8 @@ from functools import lru_cache
 import numpy as np
 
 from sasmi.errors import SasmiError
+from sasmi.render.seafloor import Surface, surface
 from sasmi.scene import Scene, Target
-from sasmi.seafloor import height_array, height_at
 
 CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (kernel reuse)
 SPHERE_SUBDIVISIONS = 3
@@ -134,11 +134,12 @@ def _checked_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
-def target_mesh(t: Target, heights_m: np.ndarray, chip_size: float, where: str) -> TriangleMesh:
+def target_mesh(t: Target, floor: Surface, chip_size: float, where: str) -> TriangleMesh:
+    """The target standing on the seabed at its (x, y), sunk by its burial."""
     v, f = _checked_shape(t, where)
     yaw = math.radians(t.yaw)
     rot = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
-    ground = height_at(heights_m, chip_size, t.x, t.y)
+    ground = float(floor.at(t.x, t.y))
     v = v @ rot.T + [t.x, t.y, ground - t.burial]
     return TriangleMesh((v * (2.0 / chip_size)).astype(np.float32), f, t.albedo)
 
@@ -173,16 +174,11 @@ def flat_floor_irradiance(positions: np.ndarray, size: int) -> np.ndarray:
     return total
 
 
-def tvg_gain(positions: np.ndarray, size: int) -> np.ndarray:
-    """(size, size) gain that makes a flat floor equally bright everywhere, 1 at the chip centre."""
-    return (math.pi / exposure(positions)) / flat_floor_irradiance(positions, size)
-
-
 def build_geometry(scene: Scene, size: int) -> Geometry:
     s = scene.sonar
-    heights = height_array(scene.seafloor, s.chip_size, size, scene.seed)
-    floor = floor_mesh(heights, s.chip_size, scene.seafloor.albedo)
-    targets = tuple(target_mesh(t, heights, s.chip_size, f"targets[{i}]") for i, t in enumerate(scene.targets))
+    seabed = surface(scene.seafloor, s.chip_size, scene.seed)
+    floor = floor_mesh(seabed.grid(size), s.chip_size, scene.seafloor.albedo)
+    targets = tuple(target_mesh(t, seabed, s.chip_size, f"targets[{i}]") for i, t in enumerate(scene.targets))
     positions = emitter_positions(scene)
     return Geometry(
         size=size,

@@ -1,6 +1,6 @@
 """The one module that owns POV-Ray: Scene -> SDL text, run `povray`, read its image.
 
-It renders the same `Geometry` as `mitsuba_render` (the paper's front end was POV-Ray),
+It renders the same `Geometry` as `sasmi.render.mitsuba` (the paper's front end was POV-Ray),
 so the cross-check compares like with like:
 
 - the heightfield and every target as `mesh2` with the very same vertices and
@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from sasmi.errors import SasmiError
-from sasmi.geometry import Geometry, TriangleMesh, build_geometry
+from sasmi.render.geometry import Geometry, TriangleMesh, build_geometry
 from sasmi.scene import Scene
 
 POVRAY = "povray"

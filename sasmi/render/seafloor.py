@@ -1,0 +1,94 @@
+"""The seabed as a surface in metres (numpy only): power-law rough surface, sand ripples, rocks.
+
+The floor of a scene is one function z(x, y) of position in metres, whatever the image
+size: the rough part is drawn on a fixed grid of FLOOR_SAMPLES x FLOOR_SAMPLES points over
+the chip and interpolated bilinearly; ripples and rocks are closed-form. A render at n
+pixels samples that surface at its (n+1) x (n+1) vertices (exactly on the grid points
+when n divides FLOOR_SAMPLES), so 64, 128 and 256 px renders of one (seed, index) show the
+same seafloor, and the 64 px cross-check checks the floor a 256 px render shows.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sasmi.scene import Seafloor
+
+FLOOR_SAMPLES = 256  # rough-surface grid points across the chip (a fast FFT size)
+
+
+@dataclass(frozen=True)
+class Surface:
+    """z(x, y) in metres; x (range) and y (along track) in metres from the chip centre."""
+    chip_size: float
+    rough: np.ndarray  # (FLOOR_SAMPLES + 1,) * 2, periodic grid over the chip; row = y, col = x
+    ripple_amplitude: float
+    ripple_wavelength: float
+    ripple_direction: float  # deg from +x
+    ripple_phase: float
+    rocks: tuple[tuple[float, float, float], ...]  # (centre x, centre y, radius), m
+
+    def at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Heights (m) at points x, y (any equal shapes, m from the chip centre; clamped to the chip)."""
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        return self._add_shapes(self._rough_at(x, y), x, y)
+
+    def _add_shapes(self, heights: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """`heights` plus the ripples and rocks at x, y."""
+        if self.ripple_amplitude > 0:
+            theta = np.deg2rad(self.ripple_direction)
+            heights = heights + self.ripple_amplitude * np.sin(
+                2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase)
+        for cx, cy, r in self.rocks:
+            heights = heights + r * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * (r / 2) ** 2))
+        return heights
+
+    def _rough_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        n = self.rough.shape[0] - 1
+        u = np.clip((x + self.chip_size / 2) / self.chip_size * n, 0, n)
+        v = np.clip((y + self.chip_size / 2) / self.chip_size * n, 0, n)
+        c0, r0 = np.minimum(u.astype(np.int64), n - 1), np.minimum(v.astype(np.int64), n - 1)
+        fu, fv = u - c0, v - r0
+        h = self.rough
+        return ((1 - fv) * ((1 - fu) * h[r0, c0] + fu * h[r0, c0 + 1])
+                + fv * ((1 - fu) * h[r0 + 1, c0] + fu * h[r0 + 1, c0 + 1]))
+
+    def grid(self, n: int) -> np.ndarray:
+        """(n+1, n+1) heights (m) at the vertices of an n x n grid spanning the chip; row = y, col = x."""
+        coords = np.linspace(-self.chip_size / 2, self.chip_size / 2, n + 1)
+        x, y = np.meshgrid(coords, coords)
+        samples = self.rough.shape[0] - 1
+        if samples % n == 0:  # the vertices are grid points: take them (the same values, no interpolation cost)
+            step = samples // n
+            return self._add_shapes(self.rough[::step, ::step].copy(), x, y)
+        return self.at(x, y)
+
+
+def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
+    """The seabed of a scene. Draw order (rough surface, ripple phase, rocks) from one generator, so a
+    floor without rocks has the same rough surface and ripples (the differentiable render relies on it)."""
+    rng = np.random.default_rng([seed, 7])
+    n = FLOOR_SAMPLES
+    rough = np.zeros((n + 1, n + 1))
+    if floor.rms_height > 0:
+        # The spectrum (1 + (k L)^2)^(-beta/2), L the correlation length, beta the spectral exponent,
+        # filters Gaussian noise on the periodic n x n grid; the (n+1)-th row and column repeat the first.
+        spacing = chip_size / n
+        kx, ky = np.meshgrid(2 * np.pi * np.fft.rfftfreq(n, d=spacing), 2 * np.pi * np.fft.fftfreq(n, d=spacing))
+        spectrum = (1 + (kx**2 + ky**2) * floor.correlation_length**2) ** (-floor.spectral_exponent / 2)
+        noise = np.fft.rfft2(rng.standard_normal((n, n)))
+        field = np.fft.irfft2(noise * np.sqrt(spectrum), s=(n, n))
+        field -= field.mean()
+        std = field.std()
+        if std > 0:
+            rough = np.pad(field, ((0, 1), (0, 1)), mode="wrap") * (floor.rms_height / std)
+    phase = float(rng.uniform(0, 2 * np.pi)) if floor.ripple_amplitude > 0 else 0.0
+    rocks = []
+    for _ in range(floor.rocks):
+        cx, cy = rng.uniform(-chip_size / 2, chip_size / 2, size=2)
+        rocks.append((float(cx), float(cy), float(floor.rock_radius * rng.uniform(0.6, 1.4))))
+    return Surface(chip_size=chip_size, rough=rough, ripple_amplitude=floor.ripple_amplitude,
+                   ripple_wavelength=floor.ripple_wavelength, ripple_direction=floor.ripple_direction,
+                   ripple_phase=phase, rocks=tuple(rocks))
+

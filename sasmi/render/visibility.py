@@ -1,0 +1,132 @@
+"""Which target each pixel sees, and which target hides it from the array: ray casts for the masks.
+
+Camera rays through pixel centres find the visible surface in the rendered Mitsuba scene;
+from each floor hit, rays towards SHADOW_PROBES emitters spread over the array are traced
+against the targets alone (`Occluders`), so a ripple between a floor point and a target
+does not punch a hole in that target's acoustic shadow. A floor point hidden by a target
+from at least SHADOW_FRACTION of the probes is acoustic shadow.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sasmi.render.geometry import Geometry, TriangleMesh
+from sasmi.render.llvm import aligned
+
+CAMERA_HEIGHT = 50.0  # chip units above the floor; far above any target
+SHADOW_FRACTION = 0.5  # a floor point is in acoustic shadow when a target hides it from half the array
+SHADOW_PROBES = 8  # emitters, evenly spread over the array, that the shadow mask is tested against
+
+
+def mi_mesh(mi, name: str, mesh: TriangleMesh):
+    """A Mitsuba mesh holding `mesh`'s triangles (no BSDF set)."""
+    m = mi.Mesh(name, vertex_count=len(mesh.vertices), face_count=len(mesh.faces), has_vertex_normals=False)
+    params = mi.traverse(m)
+    params["vertex_positions"] = aligned(mesh.vertices)
+    params["faces"] = aligned(mesh.faces, np.uint32)
+    params.update()
+    return m
+
+
+def shape_ids(mi, dr, scene, count: int) -> np.ndarray:
+    """(count,) Mitsuba registry ids of the shapes named target_0 .. target_{count-1} in `scene`."""
+    by_name = {s.id(): s for s in scene.shapes()}
+    return np.array([dr.reinterpret_array(mi.UInt32, mi.ShapePtr(by_name[f"target_{k}"]))[0]
+                     for k in range(count)], dtype=np.int64)
+
+
+def index_of(ids: np.ndarray, target_ids: np.ndarray) -> np.ndarray:
+    """Map Mitsuba shape registry ids to target indices (-1 for floor or miss)."""
+    out = np.full(ids.shape, -1, dtype=np.int64)
+    for k, sid in enumerate(target_ids):
+        out[ids == sid] = k
+    return out
+
+
+def shadow_emitters(positions: np.ndarray) -> np.ndarray:
+    """SHADOW_PROBES emitters spread evenly over the array (all of them if there are fewer)."""
+    if len(positions) <= SHADOW_PROBES:
+        return positions
+    return positions[np.round(np.linspace(0, len(positions) - 1, SHADOW_PROBES)).astype(int)]
+
+
+def shadow_candidates(g: Geometry, points: np.ndarray) -> np.ndarray:
+    """(P,) bool: floor points whose rays towards the array could pass over a target's footprint.
+
+    A ray from floor point p to an emitter at (x_track, y_e) crosses x at the fraction
+    f = (p_x - x) / (p_x - x_track) of its way; its y there is p_y + (y_e - p_y) f. The
+    extremes over the footprint's x-range and the array's y-range bound where it can be.
+    Only candidates are traced, which keeps the shadow mask cheap on a mostly empty chip.
+    """
+    px, py = points[:, 0].astype(np.float64), points[:, 1].astype(np.float64)
+    x_track = g.emitter_positions[0, 0]
+    ye0, ye1 = g.emitter_positions[:, 1].min(), g.emitter_positions[:, 1].max()
+    out = np.zeros(len(points), dtype=bool)
+    for t in g.targets:
+        (x0, y0), (x1, y1) = t.vertices[:, :2].min(0), t.vertices[:, :2].max(0)
+        beyond = px > x0
+        span = np.maximum(px - x_track, 1e-9)
+        f_near, f_far = np.clip((px - x1) / span, 0, 1), np.clip((px - x0) / span, 0, 1)
+        corners = [py + (ye - py) * f for ye in (ye0, ye1) for f in (f_near, f_far)]
+        out |= beyond & (np.minimum.reduce(corners) <= y1) & (np.maximum.reduce(corners) >= y0)
+    return out
+
+
+class Occluders:
+    """The targets alone, as a Mitsuba scene of their own, updated in place like the rendered scene."""
+
+    def __init__(self, mi, dr, g: Geometry):
+        self.mi, self.dr = mi, dr
+        self.scene = mi.load_dict({"type": "scene", **{f"target_{k}": mi_mesh(mi, f"target_{k}", t)
+                                                       for k, t in enumerate(g.targets)}})
+        self.params = mi.traverse(self.scene)
+        self.ids = shape_ids(mi, dr, self.scene, len(g.targets))
+
+    def update(self, g: Geometry) -> None:
+        for k, t in enumerate(g.targets):
+            self.params[f"target_{k}.vertex_positions"] = aligned(t.vertices)
+        if g.targets:
+            self.params.update()
+
+    def first_hit(self, origins: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """(R,) index of the first target on each segment origin -> end, (R, 3) each; -1 for none."""
+        mi, dr = self.mi, self.dr
+        to_end = ends - origins
+        dist = np.linalg.norm(to_end, axis=1)
+        directions = to_end / dist[:, None]
+        # Positions travel as array data, not as kernel literals: one compiled kernel serves every scene.
+        rays = mi.Ray3f(mi.Point3f(*(aligned(origins[:, i]) for i in range(3))),
+                        mi.Vector3f(*(aligned(directions[:, i]) for i in range(3))))
+        hits = self.scene.ray_intersect(mi.Ray3f(rays, mi.Float(aligned(dist * (1 - 1e-4)))))
+        return index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64), self.ids)
+
+
+def visibility(mi, dr, scene, target_ids: np.ndarray, occluders: Occluders, g: Geometry
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) int64 each: index of the visible target (-1 none) and of the target shadowing the pixel (-1 none).
+
+    `scene` is the loaded Mitsuba scene of `g` (floor and targets), `target_ids` its targets' ids.
+    """
+    n = g.size
+    centres = (np.arange(n) + 0.5) / n * 2 - 1
+    xs, ys = np.meshgrid(centres, centres)
+    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
+    si = scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+    visible = index_of(np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64), target_ids)
+
+    lifted = np.asarray(si.p + si.n * 1e-4, dtype=np.float32).reshape(3, -1).T  # (P, 3)
+    emitters = shadow_emitters(g.emitter_positions).astype(np.float32)  # (K, 3)
+    owner = np.full(n * n, -1, dtype=np.int64)
+    candidates = np.nonzero(shadow_candidates(g, lifted) & (visible < 0))[0]
+    if candidates.size:
+        points = lifted[candidates]
+        # one launch for all probes, probe-major: (K * C, 3)
+        blocker = occluders.first_hit(np.tile(points, (len(emitters), 1)), np.repeat(emitters, len(points), axis=0))
+        counts = np.zeros((len(g.targets) + 1, len(points)), dtype=np.int32)  # row 0: nothing in the way
+        for per_probe in blocker.reshape(len(emitters), len(points)):
+            counts[per_probe + 1, np.arange(len(points))] += 1  # one blocker per point: no repeats
+        blocked = counts[1:]
+        owner[candidates] = np.where(blocked.max(axis=0) >= SHADOW_FRACTION * len(emitters),
+                                     blocked.argmax(axis=0), -1)
+    owner = np.where(visible >= 0, -1, owner)
+    return visible.reshape(n, n), owner.reshape(n, n)
