@@ -25,9 +25,9 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from gan import train  # noqa: E402
-from gan.critic import CRITIC_PRESETS  # noqa: E402
-from gan.dcgan import DCGAN_PRESETS  # noqa: E402
-from gan.generator import GENERATOR_PRESETS, Generator  # noqa: E402
+from gan.critic import CRITIC_NETS  # noqa: E402
+from gan.dcgan import DCGAN_NETS  # noqa: E402
+from gan.generator import GENERATOR_NETS, Generator  # noqa: E402
 from sasmi.images import write_gray  # noqa: E402
 
 
@@ -38,7 +38,7 @@ def sync(device: torch.device) -> None:
 
 @torch.no_grad()
 def inference_ms(preset: str, device: torch.device, batch: int, size: int = 256, repeats: int = 3) -> float:
-    generator = Generator(GENERATOR_PRESETS[preset]).to(device).eval()
+    generator = Generator(GENERATOR_NETS[preset]).to(device).eval()
     x = torch.rand(batch, 1, size, size, device=device) * 2 - 1
     generator(x)  # warm-up (allocations, cuDNN autotuning)
     sync(device)
@@ -53,9 +53,9 @@ def training_steps_per_s(kind: str, preset: str, device: torch.device, size: int
     def run(n: int) -> float:
         cfg = replace(train.RUN_KINDS[kind](), steps=n, size=size, sample_every=10 ** 9, checkpoint_every=10 ** 9)
         if kind == "sasgan":
-            cfg = replace(cfg, generator=GENERATOR_PRESETS[preset], critic=CRITIC_PRESETS[preset])
+            cfg = replace(cfg, generator=GENERATOR_NETS[preset], critic=CRITIC_NETS[preset])
         if kind == "dcgan":
-            cfg = replace(cfg, dcgan=DCGAN_PRESETS[preset], critic=CRITIC_PRESETS[preset], final_samples=1)
+            cfg = replace(cfg, dcgan=DCGAN_NETS[preset], critic=CRITIC_NETS[preset], final_samples=1)
         out = Path(tempfile.mkdtemp(dir=data))
         start = time.perf_counter()
         if kind == "autoencoder":
@@ -73,7 +73,7 @@ def training_steps_per_s(kind: str, preset: str, device: torch.device, size: int
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--devices", nargs="+", help="default: cpu, and cuda when present")
-    parser.add_argument("--presets", nargs="+", choices=sorted(GENERATOR_PRESETS),
+    parser.add_argument("--presets", nargs="+", choices=sorted(GENERATOR_NETS),
                         help="generator presets (default: small on CPU, small and paper on CUDA)")
     parser.add_argument("--train-size", type=int, default=128, help="training image size (default 128, the chips)")
     parser.add_argument("--train-steps", type=int, default=10, help="timed training steps per kind (default 10)")
