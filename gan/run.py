@@ -127,10 +127,14 @@ def read_checkpoint(path: Path, kind: str) -> Saved:
     """A checkpoint of a `kind` run, or one SasmiError naming the file."""
     if not path.is_file():
         raise SasmiError(f"{path}: no such checkpoint")
+    if path.stat().st_size == 0:
+        raise SasmiError(f"{path}: empty file, not a checkpoint")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # truncated, empty, random bytes, a pickle carrying code: all one line
-        raise SasmiError(f"{path}: not a readable checkpoint ({_one_line(e)})") from None
+    except Exception as e:  # truncated, random bytes, a pickle carrying code: all one line
+        why = ("refused: it names Python objects other than tensors and plain types, which could run code"
+               if "GLOBAL" in str(e) else f"truncated or not a torch file; {type(e).__name__}")
+        raise SasmiError(f"{path}: not a readable checkpoint ({why})") from None
     if not isinstance(ckpt, dict) or not isinstance(ckpt.get("state"), dict) or "step" not in ckpt:
         raise SasmiError(f"{path}: not a sasmi training checkpoint")
     if "config" not in ckpt:  # checkpoints written before the config moved inside them

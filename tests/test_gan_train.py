@@ -211,3 +211,32 @@ def test_translate_folder_carries_render_set_labels(tmp_path, generator, renders
     assert sorted(p.name for p in (tmp_path / "out" / "masks").iterdir()) == [f"{i:06d}.png" for i in range(6)]
     with pytest.raises(SasmiError, match="outside the input"):
         translate_folder(generator, renders, renders / "images" / "out")
+
+
+class _Identity(torch.nn.Module):
+    """A stand-in generator that returns its input and records the shapes it was shown."""
+
+    def __init__(self, image_size: int):
+        super().__init__()
+        self.weight = torch.nn.Parameter(torch.zeros(1))  # translate() asks the parameters for the device
+        self.image_size, self.shapes = image_size, []
+
+    def forward(self, x):
+        self.shapes.append(tuple(x.shape[-2:]))
+        return x
+
+
+@pytest.mark.parametrize("shape, seen, scaled", [((64, 128), (32, 64), (32, 64)),  # aspect kept, not squashed
+                                                  ((48, 40), (40, 32), (38, 32))])  # padded to a multiple of 4
+def test_translate_shows_the_generator_what_training_showed_it(shape, seen, scaled):
+    from sasmi.preprocess import resize
+
+    images = np.random.default_rng(0).random((2, *shape)).astype(np.float32)
+    generator = _Identity(32)
+    out = translate(generator, images)
+    assert generator.shapes == [seen]  # short side at the training size, as ImageSet scales training images
+    x = torch.from_numpy(images)[:, None]
+    expected = resize(resize(x, scaled), shape)[:, 0].numpy()  # the padding is cropped off again
+    np.testing.assert_allclose(out, expected, atol=1e-6)
+    squashed = resize(resize(x, (32, 32)), shape)[:, 0].numpy()
+    assert np.abs(out - squashed).mean() > 0.01  # what the old path did differs
