@@ -1,12 +1,12 @@
 """GAN speed: generator inference ms/image at 256² (batch 1 and 16) and training steps/s.
 
     .venv/bin/python benchmarks/gan.py                       # CPU, and CUDA when present
-    .venv/bin/python benchmarks/gan.py --presets small paper --train-size 128 --train-steps 20
+    .venv/bin/python benchmarks/gan.py --nets small paper --train-size 128 --train-steps 20
 
 Training steps/s come from the real training functions on a temporary folder of random
 images, timed as the difference between an N+2-step and a 2-step run, so start-up
 (reading data, TensorBoard) is excluded; one SAS GAN or DCGAN step is n_critic = 5
-critic updates and one generator update. The paper preset at 256² on a CPU takes
+critic updates and one generator update. The paper net at 256² on a CPU takes
 minutes; it runs on CUDA by default and on the CPU only when asked for.
 """
 from __future__ import annotations
@@ -24,10 +24,13 @@ sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).re
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from gan import train  # noqa: E402
-from gan.critic import CRITIC_PRESETS  # noqa: E402
-from gan.dcgan import DCGAN_PRESETS  # noqa: E402
-from gan.generator import GENERATOR_PRESETS, Generator  # noqa: E402
+from gan.critic import CRITIC_NETS  # noqa: E402
+from gan.dcgan import DCGAN_NETS  # noqa: E402
+from gan.generator import GENERATOR_NETS, Generator  # noqa: E402
+from gan.kinds.autoencoder import AUTOENCODER  # noqa: E402
+from gan.kinds.dcgan import DCGAN  # noqa: E402
+from gan.kinds.sasgan import SASGAN  # noqa: E402
+from gan.loop import train  # noqa: E402
 from sasmi.images import write_gray  # noqa: E402
 
 
@@ -37,8 +40,8 @@ def sync(device: torch.device) -> None:
 
 
 @torch.no_grad()
-def inference_ms(preset: str, device: torch.device, batch: int, size: int = 256, repeats: int = 3) -> float:
-    generator = Generator(GENERATOR_PRESETS[preset]).to(device).eval()
+def inference_ms(net: str, device: torch.device, batch: int, size: int = 256, repeats: int = 3) -> float:
+    generator = Generator(GENERATOR_NETS[net]).to(device).eval()
     x = torch.rand(batch, 1, size, size, device=device) * 2 - 1
     generator(x)  # warm-up (allocations, cuDNN autotuning)
     sync(device)
@@ -49,21 +52,20 @@ def inference_ms(preset: str, device: torch.device, batch: int, size: int = 256,
     return (time.perf_counter() - start) / repeats / batch * 1000
 
 
-def training_steps_per_s(kind: str, preset: str, device: torch.device, size: int, steps: int, data: Path) -> float:
+def training_steps_per_s(kind, net: str, device: torch.device, size: int, steps: int, data: Path) -> float:
+    inputs = {"real": data / "real"}
+    if kind is SASGAN:
+        inputs |= {"renders": data / "renders", "phi": data / f"ae{size}"}
+
     def run(n: int) -> float:
-        cfg = replace(train.RUN_KINDS[kind](), steps=n, size=size, sample_every=10 ** 9, checkpoint_every=10 ** 9)
-        if kind == "sasgan":
-            cfg = replace(cfg, generator=GENERATOR_PRESETS[preset], critic=CRITIC_PRESETS[preset])
-        if kind == "dcgan":
-            cfg = replace(cfg, dcgan=DCGAN_PRESETS[preset], critic=CRITIC_PRESETS[preset], final_samples=1)
+        cfg = replace(kind.config(), steps=n, size=size, sample_every=10 ** 7, checkpoint_every=10 ** 7)
+        if kind is SASGAN:
+            cfg = replace(cfg, generator=GENERATOR_NETS[net], critic=CRITIC_NETS[net])
+        if kind is DCGAN:
+            cfg = replace(cfg, dcgan=DCGAN_NETS[net], critic=CRITIC_NETS[net], final_samples=1)
         out = Path(tempfile.mkdtemp(dir=data))
         start = time.perf_counter()
-        if kind == "autoencoder":
-            train.train_autoencoder(cfg, out, data / "real", device)
-        elif kind == "sasgan":
-            train.train_sasgan(cfg, out, data / "real", data / "renders", data / f"ae{size}", device)
-        else:
-            train.train_dcgan(cfg, out, data / "real", device)
+        train(kind, cfg, out, inputs, device)
         sync(device)
         return time.perf_counter() - start
 
@@ -73,8 +75,8 @@ def training_steps_per_s(kind: str, preset: str, device: torch.device, size: int
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--devices", nargs="+", help="default: cpu, and cuda when present")
-    parser.add_argument("--presets", nargs="+", choices=sorted(GENERATOR_PRESETS),
-                        help="generator presets (default: small on CPU, small and paper on CUDA)")
+    parser.add_argument("--nets", nargs="+", choices=sorted(GENERATOR_NETS),
+                        help="network sizes (default: small on CPU, small and paper on CUDA)")
     parser.add_argument("--train-size", type=int, default=128, help="training image size (default 128, the chips)")
     parser.add_argument("--train-steps", type=int, default=10, help="timed training steps per kind (default 10)")
     args = parser.parse_args()
@@ -86,21 +88,21 @@ def main() -> None:
         for i in range(16):
             write_gray(data / "real" / f"{i}.png", rng.random((args.train_size, args.train_size)))
             write_gray(data / "renders" / "images" / f"{i}.png", rng.random((args.train_size, args.train_size)))
-        ae_cfg = replace(train.AutoencoderRun(), steps=1, size=args.train_size)
-        train.train_autoencoder(ae_cfg, data / f"ae{args.train_size}", data / "real", torch.device("cpu"))
+        ae_cfg = replace(AUTOENCODER.config(), steps=1, size=args.train_size)
+        train(AUTOENCODER, ae_cfg, data / f"ae{args.train_size}", {"real": data / "real"}, torch.device("cpu"))
 
         print(f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads")
         for name in devices:
             device = torch.device(name)
             label = torch.cuda.get_device_name(device) if device.type == "cuda" else "CPU"
-            for preset in args.presets or (["small"] if device.type == "cpu" else ["small", "paper"]):
+            for net in args.nets or (["small"] if device.type == "cpu" else ["small", "paper"]):
                 for batch in (1, 16):
-                    ms = inference_ms(preset, device, batch)
-                    print(f"{label:>12}  generator {preset:<5} 256² batch {batch:>2}: {ms:8.2f} ms/image")
-                for kind in ("autoencoder", "sasgan", "dcgan")[preset != "small":]:  # the autoencoder has no preset
-                    rate = training_steps_per_s(kind, preset, device, args.train_size, args.train_steps, data)
-                    print(f"{label:>12}  train {kind:<11} {preset:<5} {args.train_size}² batch "
-                          f"{train.RUN_KINDS[kind]().batch}: {rate:6.2f} steps/s")
+                    ms = inference_ms(net, device, batch)
+                    print(f"{label:>12}  generator {net:<5} 256² batch {batch:>2}: {ms:8.2f} ms/image")
+                for kind in (AUTOENCODER, SASGAN, DCGAN)[net != "small":]:  # the autoencoder has one size
+                    rate = training_steps_per_s(kind, net, device, args.train_size, args.train_steps, data)
+                    print(f"{label:>12}  train {kind.name:<11} {net:<5} {args.train_size}² batch "
+                          f"{kind.config().batch}: {rate:6.2f} steps/s")
 
 
 if __name__ == "__main__":

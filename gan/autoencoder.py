@@ -23,6 +23,8 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from gan.run import config_from_dict, load_weights, read_run
+
 PHI_DIM = 1024
 PHI_GRID = 8  # PHI_DIM == widths[-1] * PHI_GRID**2
 
@@ -87,14 +89,12 @@ def load_encoder(run_dir: str | os.PathLike, device: str | torch.device = "cpu",
                  checkpoint: str = "best") -> Encoder:
     """The frozen φ encoder of an autoencoder run: (B, 1, S, S) in [-1, 1] → (B, 1024).
 
-    `.image_size` is the size it was trained at; eval mode, no gradients to its weights.
+    `.image_size` is the size it was trained at, `.checkpoint` the file it came from;
+    eval mode, no gradients to its weights.
     """
-    from gan.train import read_run
-
-    cfg, state = read_run(run_dir, "autoencoder", checkpoint)
-    model = Autoencoder(cfg.autoencoder)
-    model.load_state_dict(state["state"]["autoencoder"])
+    saved = read_run(run_dir, "autoencoder", checkpoint)
+    model = Autoencoder(config_from_dict(AutoencoderConfig, saved.config.get("autoencoder", {}), str(saved.path)))
+    load_weights(model, saved, "autoencoder")
     encoder = model.encoder.to(device).eval().requires_grad_(False)
-    encoder.image_size = cfg.size
+    encoder.image_size, encoder.checkpoint = saved.config["size"], saved.path
     return encoder
-

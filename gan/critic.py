@@ -18,7 +18,7 @@ class CriticConfig:
     width: int = 32  # channels of the first conv, doubled at each of the four stages
 
 
-CRITIC_PRESETS = {"small": CriticConfig(32), "paper": CriticConfig(64)}
+CRITIC_NETS = {"small": CriticConfig(32), "paper": CriticConfig(64)}
 
 
 class Critic(nn.Module):

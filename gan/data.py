@@ -12,37 +12,12 @@ import os
 import warnings
 from pathlib import Path
 
-import numpy as np
 import torch
-import torch.nn.functional as F
 
+from gan.run import fingerprint
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, read_gray
-
-
-def check_size(size: int) -> None:
-    # four stride-2 stages in the critic and the autoencoder
-    if size < 16 or size % 16:
-        raise SasmiError(f"--size {size}: must be a positive multiple of 16")
-
-
-def to_signed(images01: torch.Tensor) -> torch.Tensor:
-    return images01 * 2.0 - 1.0
-
-
-def to_unit(images: torch.Tensor) -> torch.Tensor:
-    return ((images + 1.0) * 0.5).clamp(0.0, 1.0)
-
-
-def resize_short_side(image01: np.ndarray, size: int) -> torch.Tensor:
-    """(H, W) in [0, 1] → (1, h, w) with min(h, w) == size; antialiased when shrinking."""
-    h, w = image01.shape
-    scale = size / min(h, w)
-    shape = (max(size, round(h * scale)), max(size, round(w * scale)))
-    x = torch.from_numpy(np.ascontiguousarray(image01, dtype=np.float32))[None, None]
-    if shape != (h, w):
-        x = F.interpolate(x, size=shape, mode="bilinear", antialias=True, align_corners=False)
-    return x[0].clamp(0.0, 1.0)
+from sasmi.preprocess import centre_crop, check_size, resize_short_side, unit_to_signed
 
 
 class ImageSet:
@@ -72,14 +47,13 @@ class ImageSet:
     def __len__(self) -> int:
         return len(self.images)
 
+    def fingerprint(self) -> str:
+        """Which files were used: a resumed run must see the same ones."""
+        return fingerprint(self.paths, self.folder)
+
     def center(self, indices: list[int]) -> torch.Tensor:
         """(B, 1, S, S) in [-1, 1], centre-cropped, no augmentation (fixed sample grids)."""
-        out = []
-        for i in indices:
-            _, h, w = self.images[i].shape
-            top, left = (h - self.size) // 2, (w - self.size) // 2
-            out.append(self.images[i][:, top:top + self.size, left:left + self.size])
-        return to_signed(torch.stack(out))
+        return unit_to_signed(torch.stack([centre_crop(self.images[i], self.size) for i in indices]))
 
 
 class Batches:
@@ -117,7 +91,7 @@ class Batches:
             if torch.rand((), generator=self.rng) < 0.5:
                 crop = crop.flip(-2)  # along-track (image y)
             out.append(crop)
-        return to_signed(torch.stack(out))
+        return unit_to_signed(torch.stack(out))
 
     def state_dict(self) -> dict:
         return {"rng": self.rng.get_state(), "order": self.order.clone(), "pos": self.pos}

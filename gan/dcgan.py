@@ -8,11 +8,15 @@ input and the φ loss.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 import torch.nn as nn
+
+from gan.run import config_from_dict, load_weights, read_run
+from sasmi.preprocess import signed_to_unit
 
 
 @dataclass(frozen=True)
@@ -21,7 +25,7 @@ class DCGANConfig:
     width: int = 32  # channels before the last transposed conv; 8× at the start
 
 
-DCGAN_PRESETS = {"small": DCGANConfig(100, 32), "paper": DCGANConfig(100, 64)}
+DCGAN_NETS = {"small": DCGANConfig(100, 32), "paper": DCGANConfig(100, 64)}
 
 
 class DCGANGenerator(nn.Module):
@@ -52,4 +56,19 @@ def sample(generator: DCGANGenerator, n: int, seed: int = 0, batch: int = 64) ->
     device = next(generator.parameters()).device
     z = torch.randn(n, generator.z_dim, generator=torch.Generator().manual_seed(seed))
     out = [generator(z[i:i + batch].to(device)).cpu() for i in range(0, n, batch)]
-    return ((torch.cat(out)[:, 0] + 1.0) * 0.5).clamp(0.0, 1.0).numpy()
+    return signed_to_unit(torch.cat(out)[:, 0]).numpy()
+
+
+def load_dcgan(run_dir: str | os.PathLike, device: str | torch.device = "cpu",
+               checkpoint: str = "last") -> DCGANGenerator:
+    """The DCGAN generator of a run: (B, z_dim) → (B, 1, S, S) in [-1, 1]; `.image_size` = S; eval mode.
+
+    sample(generator, n, seed) turns it into n images in [0, 1].
+    """
+    saved = read_run(run_dir, "dcgan", checkpoint)
+    cfg = config_from_dict(DCGANConfig, saved.config.get("dcgan", {}), str(saved.path))
+    generator = DCGANGenerator(cfg, saved.config["size"])
+    load_weights(generator, saved, "generator")
+    generator = generator.to(device).eval().requires_grad_(False)
+    generator.image_size, generator.checkpoint = saved.config["size"], saved.path
+    return generator

@@ -8,10 +8,13 @@ borders free of a dark frame. Fully convolutional: any size that is a multiple o
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import torch
 import torch.nn as nn
+
+from gan.run import config_from_dict, load_weights, read_run
 
 
 @dataclass(frozen=True)
@@ -22,7 +25,7 @@ class GeneratorConfig:
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
 # (64 wide, 9 blocks); Reed et al.'s exact widths were not available to us.
-GENERATOR_PRESETS = {"small": GeneratorConfig(16, 4), "paper": GeneratorConfig(64, 9)}
+GENERATOR_NETS = {"small": GeneratorConfig(16, 4), "paper": GeneratorConfig(64, 9)}
 
 
 def _conv_norm_relu(c_in: int, c_out: int, kernel: int, stride: int = 1) -> list[nn.Module]:
@@ -60,3 +63,14 @@ class Generator(nn.Module):
         # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]
         assert render.ndim == 4 and render.shape[1] == 1 and render.shape[-1] % 4 == 0, render.shape
         return self.net(render)
+
+
+def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",
+                   checkpoint: str = "last") -> Generator:
+    """The SAS GAN generator of a run: (B, 1, S, S) in [-1, 1] → same; `.image_size` = S; eval mode."""
+    saved = read_run(run_dir, "sasgan", checkpoint)
+    generator = Generator(config_from_dict(GeneratorConfig, saved.config.get("generator", {}), str(saved.path)))
+    load_weights(generator, saved, "generator")
+    generator = generator.to(device).eval().requires_grad_(False)
+    generator.image_size, generator.checkpoint = saved.config["size"], saved.path
+    return generator

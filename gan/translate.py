@@ -17,33 +17,36 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from gan.data import to_signed, to_unit
 from sasmi.errors import SasmiError
 from sasmi.images import atomic_path, list_images, read_gray, write_gray, write_text
+from sasmi.preprocess import resize, signed_to_unit, unit_to_signed
 
-
-def _resize(x: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
-    if tuple(x.shape[-2:]) == shape:
-        return x
-    return F.interpolate(x, size=shape, mode="bilinear", antialias=True, align_corners=False).clamp(0.0, 1.0)
+MULTIPLE = 4  # the generator's two stride-2 stages
 
 
 @torch.no_grad()
 def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16) -> np.ndarray:
     """(N, H, W) floats in [0, 1] → (N, H, W) float32 in [0, 1].
 
-    Images are resized to the generator's training size and the outputs back to H×W.
+    The generator sees what training showed it: each image scaled so its short side is
+    the training size S, aspect kept (training centre-crops S×S windows from exactly such
+    images; the fully convolutional generator takes the whole of it), reflect-padded to a
+    multiple of 4; its output is cropped back and resized to H×W.
     """
     if images01.ndim != 3:
         raise ValueError(f"expected (N, H, W) images, got shape {images01.shape}")
     size = generator.image_size
     device = next(generator.parameters()).device
+    h, w = images01.shape[1:]
+    scaled = (max(size, round(h * size / min(h, w))), max(size, round(w * size / min(h, w))))
+    pad_h, pad_w = -scaled[0] % MULTIPLE, -scaled[1] % MULTIPLE
     out = np.empty(images01.shape, dtype=np.float32)
     for i in range(0, len(images01), batch):
         x = torch.from_numpy(np.ascontiguousarray(images01[i:i + batch], dtype=np.float32))[:, None]
-        x = _resize(x.clamp(0.0, 1.0), (size, size))  # (b, 1, S, S) in [0, 1]
-        y = to_unit(generator(to_signed(x).to(device)).float().cpu())
-        out[i:i + batch] = _resize(y, images01.shape[1:])[:, 0].numpy()
+        x = resize(x.clamp(0.0, 1.0), scaled)  # (b, 1, h', w') in [0, 1], min(h', w') == S
+        x = F.pad(unit_to_signed(x), (0, pad_w, 0, pad_h), mode="reflect")  # (b, 1, h'+, w'+) in [-1, 1]
+        y = generator(x.to(device)).float().cpu()[..., :scaled[0], :scaled[1]]
+        out[i:i + batch] = resize(signed_to_unit(y), (h, w))[:, 0].numpy()
     return out
 
 

@@ -67,3 +67,13 @@ def test_train_translate_and_resume_from_the_command_line(tmp_path, capsys, imag
     assert main(["train", "sasgan", "--renders", str(images), "--phi", ae, "--out", gan, "--real", str(images),
                  "--steps", "4", "--resume", "--phi-margin", "0.5"]) == 2
     assert "phi_margin=0.5 (run has 0.3)" in capsys.readouterr().err
+
+
+def test_net_flag_picks_network_sizes(tmp_path, images):
+    import torch
+
+    out = tmp_path / "dc"
+    assert main(["train", "dcgan", "--real", str(images), "--out", str(out), "--size", "32", "--batch", "2",
+                 "--steps", "1", "--n-critic", "1", "--net", "paper", "--device", "cpu"]) == 0
+    config = torch.load(out / "checkpoints" / "last.pt", weights_only=True)["config"]
+    assert config["critic"] == {"width": 64} and config["dcgan"]["width"] == 64

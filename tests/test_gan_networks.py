@@ -5,7 +5,7 @@ import torch
 from gan.autoencoder import PHI_DIM, Autoencoder, AutoencoderConfig
 from gan.critic import Critic, CriticConfig
 from gan.dcgan import DCGANConfig, DCGANGenerator, sample
-from gan.generator import GENERATOR_PRESETS, Generator, GeneratorConfig
+from gan.generator import GENERATOR_NETS, Generator, GeneratorConfig
 
 
 @pytest.fixture(autouse=True)
@@ -45,7 +45,7 @@ def test_generator_keeps_shape_and_range(size):
 
 
 def test_generator_presets_differ_only_in_size():
-    small, paper = (sum(p.numel() for p in Generator(GENERATOR_PRESETS[k]).parameters()) for k in ("small", "paper"))
+    small, paper = (sum(p.numel() for p in Generator(GENERATOR_NETS[k]).parameters()) for k in ("small", "paper"))
     assert small < paper / 10
 
 

@@ -8,10 +8,12 @@ import pytest
 import torch
 from PIL import Image
 
-from gan import train
 from gan.autoencoder import AutoencoderConfig
 from gan.critic import CriticConfig
 from gan.generator import GeneratorConfig
+from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from gan.kinds.sasgan import SASGAN, SasganRun
+from gan.loop import train
 from sasmi.cli import main
 
 from conftest import REPO
@@ -23,14 +25,15 @@ CPU = torch.device("cpu")
 @pytest.fixture(scope="module")
 def generator_runs(tmp_path_factory, real_chips, render_set):
     root = tmp_path_factory.mktemp("generate")
-    ae = train.AutoencoderRun(steps=2, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
-                              log_every=1, sample_every=10, checkpoint_every=10)
-    phi = train.train_autoencoder(ae, root / "ae", real_chips / "targets", CPU)
+    ae = AutoencoderRun(steps=2, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
+                        log_every=1, sample_every=10, checkpoint_every=10)
+    phi = train(AUTOENCODER, ae, root / "ae", {"real": real_chips / "targets"}, CPU).out
     runs = []
     for seed in (0, 1):
-        gan_cfg = train.SasganRun(steps=2, size=32, batch=2, n_critic=1, seed=seed, generator=GeneratorConfig(4, 1),
-                                  critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)
-        runs.append(train.train_sasgan(gan_cfg, root / f"gan{seed}", real_chips / "targets", render_set, phi, CPU))
+        gan_cfg = SasganRun(steps=2, size=32, batch=2, n_critic=1, seed=seed, generator=GeneratorConfig(4, 1),
+                            critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)
+        inputs = {"real": real_chips / "targets", "renders": render_set, "phi": phi}
+        runs.append(train(SASGAN, gan_cfg, root / f"gan{seed}", inputs, CPU).out)
     return runs
 
 

@@ -1,31 +1,65 @@
 """`sasmi train {autoencoder,sasgan,dcgan}`: the φ autoencoder, the SAS GAN, the DCGAN baseline.
 
-Flags left out take the defaults of gan/train.py (documented in docs/gan.md); a run's
-resolved settings are in RUN/config.json. With --resume only --steps may change.
+Flags left out take the defaults of the run configs in gan/kinds/ (docs/gan.md). A run's
+resolved settings travel inside each checkpoint (and RUN/config.json). With --resume only
+--steps may change; --steps is the total to reach.
 """
 from __future__ import annotations
 
 import argparse
+import functools
 
-PRESETS = ("small", "paper")
+from sasmi.commands.common import add_device, add_threads, apply_threads, resolve_device
+
+NETS = ("small", "paper")
+TRAINING_FLAGS = ("steps", "size", "batch", "lr", "seed", "betas", "checkpoint_every", "n_critic", "gp_weight",
+                  "phi_weight", "phi_margin")
+
+
+def _kind(name: str):
+    """The CLI edge: the one place a run kind is chosen by its name."""
+    from gan.kinds.autoencoder import AUTOENCODER
+    from gan.kinds.dcgan import DCGAN
+    from gan.kinds.sasgan import SASGAN
+
+    return {"autoencoder": AUTOENCODER, "sasgan": SASGAN, "dcgan": DCGAN}[name]
+
+
+class _DefaultsHelp(argparse.HelpFormatter):
+    """Shows each flag's default from the kind's config dataclass, read only when --help
+    is asked for, so that building the parser does not import torch."""
+
+    def __init__(self, prog: str, kind: str):
+        super().__init__(prog)
+        self.kind = kind
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        defaults = _kind(self.kind).config()
+        if hasattr(defaults, action.dest) and action.dest not in ("critic", "generator", "dcgan"):
+            return f"{action.help} (default {getattr(defaults, action.dest)})"
+        return action.help
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real", required=True, metavar="DIR", help="real images, searched recursively")
     p.add_argument("--out", required=True, metavar="RUN", help="run folder to create (or to continue with --resume)")
-    p.add_argument("--steps", type=int, help="total generator updates to reach")
-    p.add_argument("--size", type=int, help="image size S (multiple of 16)")
-    p.add_argument("--batch", type=int, help="batch size")
-    p.add_argument("--lr", type=float, help="Adam learning rate")
+    p.add_argument("--steps", type=int, help=f"total updates to reach")
+    p.add_argument("--size", type=int, help=f"image size S, a multiple of 16")
+    p.add_argument("--batch", type=int, help=f"batch size")
+    p.add_argument("--lr", type=float, help=f"Adam learning rate")
+    p.add_argument("--betas", type=float, nargs=2, metavar=("B1", "B2"), help=f"Adam betas")
     p.add_argument("--seed", type=int, help="seed of weights, data order, augmentation and noise")
-    p.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda or cuda:N")
+    p.add_argument("--checkpoint-every", type=int, metavar="N",
+                   help=f"steps between checkpoints; also best.pt's interval")
     p.add_argument("--resume", action="store_true", help="continue RUN from checkpoints/last.pt")
+    add_device(p)
+    add_threads(p)
 
 
 def _add_gan(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--betas", type=float, nargs=2, metavar=("B1", "B2"), help="Adam betas")
-    p.add_argument("--n-critic", type=int, help="critic updates per generator update")
-    p.add_argument("--preset", choices=PRESETS, help="network sizes: small (CPU) or paper (256², GPU)")
+    p.add_argument("--n-critic", type=int, help=f"critic updates per generator update")
+    p.add_argument("--gp-weight", type=float, help=f"λ of the gradient penalty")
+    p.add_argument("--net", choices=NETS, help="network sizes: small (CPU) or paper (256², GPU) (default small)")
 
 
 def add_parser(subparsers) -> None:
@@ -33,45 +67,49 @@ def add_parser(subparsers) -> None:
                                    description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     kinds = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
 
-    p = kinds.add_parser("autoencoder", help="φ: L2 autoencoder on real chips")
+    def add_kind(name: str, help: str) -> argparse.ArgumentParser:
+        return kinds.add_parser(name, help=help, formatter_class=functools.partial(_DefaultsHelp, kind=name))
+
+    p = add_kind("autoencoder", "φ: L2 autoencoder on real chips")
     _add_common(p)
 
-    p = kinds.add_parser("sasgan", help="render → real: WGAN-GP + φ constraint")
+    p = add_kind("sasgan", "render → real: WGAN-GP + φ constraint")
     _add_common(p)
     p.add_argument("--renders", required=True, metavar="DIR", help="a render set (or a folder of renders)")
     p.add_argument("--phi", required=True, metavar="RUN_AE", help="a trained autoencoder run")
     _add_gan(p)
-    p.add_argument("--phi-weight", type=float, help="weight of the φ loss")
-    p.add_argument("--phi-margin", type=float, help="γ: free relative φ change")
+    p.add_argument("--phi-weight", type=float, help=f"weight of the φ loss")
+    p.add_argument("--phi-margin", type=float, help=f"γ: free relative φ change")
 
-    p = kinds.add_parser("dcgan", help="unconditional baseline: z → image, same objective")
+    p = add_kind("dcgan", "unconditional baseline: z → image, same objective")
     _add_common(p)
     _add_gan(p)
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from gan import train
-    from gan.critic import CRITIC_PRESETS
-    from gan.dcgan import DCGAN_PRESETS
-    from gan.generator import GENERATOR_PRESETS
+    from gan.critic import CRITIC_NETS
+    from gan.dcgan import DCGAN_NETS
+    from gan.generator import GENERATOR_NETS
+    from gan.kinds.sasgan import SASGAN
+    from gan.loop import resolve_config, train
 
-    overrides = {k: getattr(args, k) for k in ("steps", "size", "batch", "lr", "seed", "betas", "n_critic",
-                                               "phi_weight", "phi_margin") if getattr(args, k, None) is not None}
+    kind = _kind(args.kind)
+    inputs = {"real": args.real} | ({"renders": args.renders, "phi": args.phi} if kind is SASGAN else {})
+    overrides = {k: getattr(args, k) for k in TRAINING_FLAGS if getattr(args, k, None) is not None}
     if "betas" in overrides:
         overrides["betas"] = tuple(overrides["betas"])
-    if getattr(args, "preset", None) and args.kind == "sasgan":
-        overrides |= {"generator": GENERATOR_PRESETS[args.preset], "critic": CRITIC_PRESETS[args.preset]}
-    if getattr(args, "preset", None) and args.kind == "dcgan":
-        overrides |= {"dcgan": DCGAN_PRESETS[args.preset], "critic": CRITIC_PRESETS[args.preset]}
-    cfg = train.resolve_config(args.kind, args.out, overrides, args.resume)
-    device = train.resolve_device(args.device)
+    if getattr(args, "net", None):
+        overrides["critic"] = CRITIC_NETS[args.net]
+        overrides |= {"generator": GENERATOR_NETS[args.net]} if kind is SASGAN else {"dcgan": DCGAN_NETS[args.net]}
+    apply_threads(args.threads)
+    device = resolve_device(args.device)
+    cfg = resolve_config(kind, args.out, overrides, args.resume)
 
-    if args.kind == "autoencoder":
-        out = train.train_autoencoder(cfg, args.out, args.real, device, args.resume)
-    elif args.kind == "sasgan":
-        out = train.train_sasgan(cfg, args.out, args.real, args.renders, args.phi, device, args.resume)
+    done = train(kind, cfg, args.out, inputs, device, args.resume)
+    if done.step == done.start and args.resume:
+        print(f"sasmi train {args.kind}: {done.out} is already at step {done.step} (--steps {cfg.steps}); "
+              f"nothing trained; raise --steps to train on")
     else:
-        out = train.train_dcgan(cfg, args.out, args.real, device, args.resume)
-    print(f"sasmi train {args.kind}: {out} at step {cfg.steps}")
+        print(f"sasmi train {args.kind}: {done.out} trained steps {done.start + 1}-{done.step}")
     return 0

@@ -1,0 +1,77 @@
+"""The DCGAN baseline run: z → image with the same WGAN-GP critic as the SAS GAN."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from gan.critic import Critic
+from gan.data import Batches, ImageSet
+from gan.dcgan import DCGANConfig, DCGANGenerator, sample
+from gan.kinds.common import GanRun, Noise, critic_phase, grad_norm
+from gan.loop import Kind, Logs, Phases
+from gan.losses import generator_loss
+from gan.run import check_number
+from sasmi.images import write_gray
+
+
+@dataclass(frozen=True)
+class DcganRun(GanRun):
+    dcgan: DCGANConfig = DCGANConfig()
+    final_samples: int = 256  # images written to final_samples/ when the run completes
+
+    def validate(self) -> "DcganRun":
+        super().validate()
+        check_number("--final-samples", self.final_samples, 0, 10 ** 5, integer=True)
+        return self
+
+
+def build(cfg: DcganRun, inputs: dict[str, Path], device: torch.device) -> Phases:
+    # ---- data and the run's noise stream
+    real = ImageSet(inputs["real"], cfg.size)
+    real_batches = Batches(real, cfg.batch, seed=cfg.seed)
+    noise = Noise(cfg.seed + 2)
+    fixed_z = torch.randn(16, cfg.dcgan.z_dim, generator=torch.Generator().manual_seed(cfg.seed + 3)).to(device)
+
+    # ---- models and optimisers
+    generator = DCGANGenerator(cfg.dcgan, cfg.size).to(device)
+    critic = Critic(cfg.critic, cfg.size).to(device)
+    opt_g = torch.optim.Adam(generator.parameters(), lr=cfg.lr, betas=cfg.betas)
+    opt_c = torch.optim.Adam(critic.parameters(), lr=cfg.lr, betas=cfg.betas)
+
+    def codes() -> torch.Tensor:
+        return noise.normal(cfg.batch, cfg.dcgan.z_dim).to(device)  # (B, z_dim) standard normal
+
+    critic_step = critic_phase(cfg, critic, opt_c, lambda: real_batches.next().to(device),
+                               lambda: generator(codes()), noise, device)
+
+    def generator_step() -> Logs:
+        """Fool the critic."""
+        adversarial = generator_loss(critic(generator(codes())))
+        opt_g.zero_grad(set_to_none=True)
+        adversarial.backward()
+        norm = grad_norm(generator)
+        opt_g.step()
+        return {"loss/generator": adversarial.item(), "grad_norm/generator": norm}
+
+    @torch.no_grad()
+    def samples() -> list[torch.Tensor]:
+        generator.eval()
+        rows = list(generator(fixed_z).split(8))
+        generator.train()
+        return rows
+
+    def finish(out: Path) -> None:
+        for i, image in enumerate(sample(generator, cfg.final_samples, seed=cfg.seed)):
+            write_gray(out / "final_samples" / f"{i:06d}.png", image)
+        generator.train()
+
+    return Phases(state={"generator": generator, "critic": critic, "opt_g": opt_g, "opt_c": opt_c,
+                         "real": real_batches, "noise": noise},
+                  inputs={"real": (str(inputs["real"]), real.fingerprint())},
+                  generator_step=generator_step, samples=samples, score="loss/wasserstein",
+                  critic_step=critic_step, critic_steps=cfg.n_critic, finish=finish)
+
+
+DCGAN = Kind("dcgan", DcganRun, build)

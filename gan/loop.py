@@ -1,0 +1,108 @@
+"""The one training loop for every run kind (autoencoder, SAS GAN, DCGAN).
+
+A kind (gan/kinds/) is a `Kind`: its config class and a `build` that reads the data,
+makes the models and returns a `Phases`: the functions one step runs, in order (as
+stylegan2-ada-pytorch's loss phases): `critic_steps` × critic step, one generator step
+(for the autoencoder: its one update), then log, samples and checkpoint here.
+
+One step is one generator update; every phase draws its own fresh batches from
+resumable streams, so 10 steps + resume + 10 steps equals 20 steps bit for bit.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Callable
+
+import torch
+
+from gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
+from sasmi.errors import SasmiError
+
+Logs = dict[str, float]
+
+
+@dataclass
+class Phases:
+    """What a kind hands the loop: its state and the phases of one step."""
+    state: dict[str, Any]  # everything with state_dict/load_state_dict that goes into a checkpoint
+    inputs: dict[str, tuple[str, str]]  # flag name → (folder, fingerprint): checked on resume
+    generator_step: Callable[[], Logs]  # one generator (or autoencoder) update on fresh batches
+    samples: Callable[[], list[torch.Tensor]]  # sample-grid rows, each (n, 1, S, S) in [-1, 1]
+    score: str  # the log entry whose interval mean picks best.pt (lower is better)
+    critic_step: Callable[[], Logs] | None = None  # one critic update on fresh batches
+    critic_steps: int = 0  # critic updates per step
+    finish: Callable[[Path], None] | None = None  # after the last step (e.g. DCGAN's final samples)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A run kind: the name its run folders record, its config, and how to build it."""
+    name: str
+    config: type[RunConfig]
+    build: Callable[[Any, dict[str, Path], torch.device], Phases]  # (config, inputs, device)
+
+
+@dataclass(frozen=True)
+class Trained:
+    out: Path
+    start: int  # the step the run started (or resumed) from
+    step: int  # the step it reached
+
+
+def resolve_config(kind: Kind, out: str | os.PathLike, overrides: dict, resume: bool) -> RunConfig:
+    """The config a run will use: defaults + overrides, or on resume the config inside last.pt.
+
+    On resume only `steps` may change: the checkpoint was trained with the saved settings.
+    """
+    out = Path(out)
+    last = out / "checkpoints" / "last.pt"
+    if not resume:
+        if last.exists():
+            raise SasmiError(f"{out}: already holds a run; pass --resume to continue it or choose another --out")
+        try:
+            cfg = replace(kind.config(), **overrides)
+        except (TypeError, ValueError) as e:
+            raise SasmiError(f"{kind.name}: {e}") from None
+        return cfg.validate()
+    if not last.is_file():
+        raise SasmiError(f"{out}: nothing to resume (no checkpoints/last.pt)")
+    saved = config_from_dict(kind.config, read_checkpoint(last, kind.name).config, str(last))
+    clashes = [f"{k}={v!r} (run has {getattr(saved, k)!r})" for k, v in overrides.items()
+               if k != "steps" and v != getattr(saved, k)]
+    if clashes:
+        raise SasmiError(f"{out}: cannot resume with changed settings: {', '.join(clashes)}")
+    return replace(saved, **{k: v for k, v in overrides.items() if k == "steps"}).validate()
+
+
+def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, str | os.PathLike],
+          device: torch.device, resume: bool = False) -> Trained:
+    """Train (or continue) a `kind` run in `out` up to cfg.steps; see the module doc."""
+    # ---- data, models, optimisers (read before anything is written: bad input leaves no folder)
+    cfg.validate()
+    torch.manual_seed(cfg.seed)  # weight initialisation; every later draw has its own stream
+    phases = kind.build(cfg, {k: Path(v) for k, v in inputs.items()}, device)
+
+    # ---- the run folder: a fresh one, or the state of last.pt
+    run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples)
+    start = run.step
+    try:
+        for step in range(start + 1, cfg.steps + 1):
+            # ---- critic: critic_steps updates, each on fresh real and fake batches
+            logs: Logs = {}
+            for _ in range(phases.critic_steps):
+                logs = phases.critic_step()
+            # ---- generator: one update (the autoencoder's reconstruction step)
+            logs |= phases.generator_step()
+            # ---- log, samples, checkpoint
+            run.log(step, logs, score=logs[phases.score])
+            if step % cfg.sample_every == 0 or step == cfg.steps:
+                run.write_samples()
+            if step % cfg.checkpoint_every == 0 or step == cfg.steps:
+                run.checkpoint()
+    finally:
+        run.close()
+    if phases.finish and run.step == cfg.steps:
+        phases.finish(run.out)
+    return Trained(run.out, start, run.step)

@@ -1,0 +1,55 @@
+"""What several commands share: the device flag, trained-run flags, torch threads."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from sasmi.errors import SasmiError
+
+
+def add_device(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda or cuda:N (default auto)")
+
+
+def add_threads(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="torch CPU threads (default: torch's choice; 1 when other jobs share the CPU)")
+
+
+def add_generator(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--generator", required=True, metavar="RUN", help="a `sasmi train sasgan` run folder")
+    p.add_argument("--checkpoint", choices=("last", "best"), default="last",
+                   help="which checkpoint of the run (default last)")
+
+
+def resolve_device(name: str):
+    """The torch.device of a --device flag, or a SasmiError."""
+    import torch
+
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise SasmiError(f"--device {name!r}: expected auto, cpu, cuda or cuda:N") from None
+    if device.type not in ("cpu", "cuda"):
+        raise SasmiError(f"--device {name!r}: expected auto, cpu, cuda or cuda:N")
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise SasmiError(f"--device {name}: CUDA is not available on this machine")
+    return device
+
+
+def apply_threads(threads: int | None) -> None:
+    if threads is None:
+        return
+    if not 1 <= threads <= (os.cpu_count() or 1) * 4:
+        raise SasmiError(f"--threads {threads}: must be in [1, {(os.cpu_count() or 1) * 4}]")
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def check_batch(batch: int) -> int:
+    if not 1 <= batch <= 1024:
+        raise SasmiError(f"--batch {batch}: must be an integer in [1, 1024]")
+    return batch
