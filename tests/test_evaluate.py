@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from sasmi import evaluate as ev
+from sasmi.eval import metrics as ev
+from sasmi.eval import neighbours as nb
 
 
 def exact_gaussian(rng, n, mean, cov):
@@ -110,13 +111,13 @@ def test_precision_recall():
 def test_nearest_and_copy_statistics():
     rng = np.random.default_rng(6)
     real = rng.standard_normal((50, 8))
-    idx, dist = ev.nearest(real[:5] + 1e-6, real, k=2)
+    idx, dist = nb.nearest(real[:5] + 1e-6, real, k=2)
     assert list(idx[:, 0]) == [0, 1, 2, 3, 4] and np.all(dist[:, 0] < 1e-5)
-    idx, _ = ev.nearest(real, real, k=1, exclude_self=True)
+    idx, _ = nb.nearest(real, real, k=1, exclude_self=True)
     assert np.all(idx[:, 0] != np.arange(50))
-    real_nn = ev.nearest(real, real, 1, exclude_self=True)[1][:, 0]
-    copies = ev.nearest(real[:20] + 1e-3 * rng.standard_normal((20, 8)), real, 1)[1][:, 0]
-    fresh = ev.nearest(rng.standard_normal((20, 8)), real, 1)[1][:, 0]
-    assert ev.copy_statistics(copies, real_nn)["fraction_below"] == 1.0
-    stats = ev.copy_statistics(fresh, real_nn)
+    real_nn = nb.nearest(real, real, 1, exclude_self=True)[1][:, 0]
+    copies = nb.nearest(real[:20] + 1e-3 * rng.standard_normal((20, 8)), real, 1)[1][:, 0]
+    fresh = nb.nearest(rng.standard_normal((20, 8)), real, 1)[1][:, 0]
+    assert nb.copy_statistics(copies, real_nn)["fraction_below"] == 1.0
+    stats = nb.copy_statistics(fresh, real_nn)
     assert stats["fraction_below"] < 0.3 and 0.5 < stats["median_ratio"] < 2.0

@@ -48,7 +48,11 @@ def parse_sets(specs: list[str], real: Path) -> dict[str, Path]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sasmi import evaluate, sweeps
+    from sasmi.eval import report as rep
+    from sasmi.eval import sweeps
+    from sasmi.eval.config import EvalConfig, SweepConfig
+    from sasmi.eval.features import as_encoder
+    from sasmi.eval.run import StderrLog, evaluate_folders
 
     sets = parse_sets(args.sets, args.real)
     if not args.phi.is_dir():
@@ -57,26 +61,28 @@ def run(args: argparse.Namespace) -> int:
         raise SasmiError("--preset and --generator: pose sweeps need both (or neither)")
     if args.bootstrap < 2:
         raise SasmiError(f"--bootstrap {args.bootstrap}: needs at least 2 resamples for a ±")
-    cfg = evaluate.EvalConfig(bootstrap=args.bootstrap, seed=args.seed)
+    cfg = EvalConfig(bootstrap=args.bootstrap, seed=args.seed)
 
-    from gan.autoencoder import load_encoder
     from gan.train import resolve_device
 
     device = resolve_device(args.device)
-    encoder = load_encoder(args.phi, device=device)
+    encoder = as_encoder(args.phi, device)
+    log = StderrLog()
     inputs = {"real": str(args.real), **{f"set {k}": str(v) for k, v in sets.items()}, "phi": str(args.phi),
               "preset": args.preset and str(args.preset), "generator": args.generator and str(args.generator),
               "seed": args.seed}
-    report = evaluate.Report({"inputs": inputs}, (evaluate.Section(
+    report = rep.Report({"inputs": inputs}, (rep.Section(
         "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items() if v is not None)),))
-    report += evaluate.evaluate_folders(args.real, sets, encoder, args.out, cfg)
+    report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log)
     if args.preset is None:
         report += sweeps.skipped_pose_sweep("no --preset and --generator given")
     else:
-        report += sweeps.pose_sweep_from_runs(args.preset, args.generator, args.out,
-                                              sweeps.SweepConfig(seed=args.seed), device)
+        log("pose sweeps: render and translate")
+        report += sweeps.pose_sweep_from_runs(args.preset, args.generator, args.out, SweepConfig(seed=args.seed),
+                                              device)
     for warning in report.metrics["warnings"]:
         print(f"sasmi evaluate: warning: {warning}", file=sys.stderr)
-    path = evaluate.write_report(args.out, report)
+    path = rep.write_report(args.out, report)
+    log(f"wrote {path}")
     print(path)
     return 0
