@@ -12,7 +12,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.eval.neighbours import kth_neighbour_radius, pairwise_distances
+from sasmi.eval.neighbours import kth_neighbour_radius, within_any_ball
 
 
 @dataclass(frozen=True)
@@ -166,9 +166,9 @@ def precision_recall(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3)
     """
     real = _as_features(feats_real, k + 1, "precision_recall (real)")
     fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
-    d = pairwise_distances(fake, real)  # (F, R)
-    precision = np.mean((d <= kth_neighbour_radius(real, k)[None, :]).any(axis=1))
-    recall = np.mean((d.T <= kth_neighbour_radius(fake, k)[None, :]).any(axis=1))
+    # in blocks of rows (sasmi.eval.neighbours): memory stays bounded at any set size
+    precision = np.mean(within_any_ball(fake, real, kth_neighbour_radius(real, k)))
+    recall = np.mean(within_any_ball(real, fake, kth_neighbour_radius(fake, k)))
     return float(precision), float(recall)
 
 
