@@ -80,8 +80,10 @@ def test_report_from_a_trained_run(data, capsys):
     out = data.root / "report"
     rc, err = evaluate_cli(capsys, "--real", data.real, "--set", f"renders={data.renders}",
                            "--set", f"shifted={data.shifted}", "--set", f"floor={data.floor}",
-                           "--phi", data.phi, "--out", out, "--bootstrap", 10, "--device", "cpu")
+                           "--phi", data.phi, "--out", out, "--bootstrap", 10, "--device", "cpu",
+                           "--cache", data.root / "cache")
     assert rc == 0, err
+    assert [p.name.split("-")[0] for p in (data.root / "cache").iterdir()] == ["real"]  # only the real φ is kept
     assert "fewer than φ's 1024 dimensions" in err  # 24 real images < 1024 φ dimensions
     # without a terminal (no progress bars) each stage still says one line
     stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("sasmi evaluate: [")]

@@ -27,6 +27,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--bootstrap", type=int, default=100, metavar="N", help="FID resamples behind each ± (default 100)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda or cuda:N")
+    cache = p.add_mutually_exclusive_group()
+    cache.add_argument("--cache", type=Path, metavar="DIR",
+                       help="where the real set's φ is kept between evaluations, keyed by its files and the φ "
+                            "run (default $XDG_CACHE_HOME/sasmi/phi, else ~/.cache/sasmi/phi)")
+    cache.add_argument("--no-cache", action="store_true", help="compute the real set's φ afresh and keep nothing")
     p.set_defaults(run=run)
 
 
@@ -50,6 +55,7 @@ def parse_sets(specs: list[str], real: Path) -> dict[str, Path]:
 def run(args: argparse.Namespace) -> int:
     from sasmi.eval import report as rep
     from sasmi.eval import sweeps
+    from sasmi.eval.cache import default_cache_dir
     from sasmi.eval.config import EvalConfig, SweepConfig
     from sasmi.eval.features import as_encoder
     from sasmi.eval.run import StderrLog, evaluate_folders
@@ -73,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
               "seed": args.seed}
     report = rep.Report({"inputs": inputs}, (rep.Section(
         "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items() if v is not None)),))
-    report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log)
+    cache_dir = None if args.no_cache else args.cache or default_cache_dir()
+    report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log, cache_dir)
     if args.preset is None:
         report += sweeps.skipped_pose_sweep("no --preset and --generator given")
     else:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from tqdm import tqdm
@@ -83,6 +83,18 @@ def image_paths(folder: str | os.PathLike) -> list[Path]:
     return paths
 
 
-def load_set(name: str, folder: str | os.PathLike, encoder, batch: int = 32) -> FeatureSet:
-    images = load_images(image_paths(folder), encoder.image_size)
-    return FeatureSet(name, Path(folder), images, phi_features(encoder, images, batch))
+def load_set(name: str, folder: str | os.PathLike, encoder, batch: int = 32, cache_dir: str | os.PathLike | None = None,
+             log: Callable[[str], None] = lambda message: None) -> FeatureSet:
+    """Images and φ of a folder; φ is read from (or written to) `cache_dir` when one is given."""
+    from sasmi.eval import cache
+
+    paths = image_paths(folder)
+    cached = cache.cache_file(cache_dir, folder, paths, encoder) if cache_dir is not None else None
+    phi = cache.read(cached, len(paths)) if cached is not None and cached.is_file() else None
+    log(f"φ of {name}: {len(paths)} images from {folder}" + (f" (φ from the cache {cached})" if phi is not None else ""))
+    images = load_images(paths, encoder.image_size)
+    if phi is None:
+        phi = phi_features(encoder, images, batch)
+        if cached is not None:
+            cache.write(cached, phi)
+    return FeatureSet(name, Path(folder), images, phi)

@@ -51,10 +51,13 @@ def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi, batch: int = 
 
 
 def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, out_dir: str | os.PathLike,
-                     cfg: EvalConfig = EvalConfig(), log: Log = quiet) -> Report:
+                     cfg: EvalConfig = EvalConfig(), log: Log = quiet, cache_dir: str | os.PathLike | None = None
+                     ) -> Report:
     """φ of every folder, then `evaluate` and target preservation; figures go to out_dir.
 
-    Folder sizes are checked before any φ is computed, so bad input fails at once.
+    Folder sizes are checked before any φ is computed, so bad input fails at once. The real
+    set's φ is cached in `cache_dir` (sasmi.eval.cache) when given: it is the set that stays
+    the same from one evaluation to the next.
     """
     minimum = 2 * (cfg.pr_k + 1)  # two real halves, each with more than k neighbours
     n_real = len(image_paths(real))
@@ -64,12 +67,8 @@ def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, ou
         n = len(image_paths(folder))
         if n <= cfg.pr_k:
             raise SasmiError(f"{folder}: {n} images; at least {cfg.pr_k + 1} are needed")
-    log(f"φ of real: {n_real} images from {real}")
-    real_set = load_set("real", real, encoder, cfg.batch)
-    features = []
-    for name, folder in sets.items():
-        log(f"φ of {name}: {folder}")
-        features.append(load_set(name, folder, encoder, cfg.batch))
+    real_set = load_set("real", real, encoder, cfg.batch, cache_dir, log)
+    features = [load_set(name, folder, encoder, cfg.batch, log=log) for name, folder in sets.items()]
     report = evaluate(real_set, features, out_dir, cfg, log)
     log("target preservation")
     return report + target_preservation(sets, out_dir)
