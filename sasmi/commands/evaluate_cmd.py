@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
     report = rep.Report({"inputs": inputs}, (rep.Section(
         "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items() if v is not None)),))
     cache_dir = None if args.no_cache else args.cache or default_cache_dir()
-    report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log, cache_dir)
+    report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log, cache_dir,
+                               statistics=None)  # the lead's hook: sasmi.stats.chip_statistics once merged
     if args.preset is None:
         report += sweeps.skipped_pose_sweep("no --preset and --generator given")
     else:

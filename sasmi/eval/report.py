@@ -92,6 +92,19 @@ def copying_markdown(copying: dict, sets: Sequence[FeatureSet], cfg: EvalConfig)
     return "\n".join(lines)
 
 
+def statistics_markdown(rows: dict[str, dict]) -> str:
+    """A table with one row per set and one column per statistic (in order of first appearance)."""
+    columns = list(dict.fromkeys(key for row in rows.values() for key in row))
+
+    def cell(v) -> str:
+        return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)
+
+    lines = ["| set | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]
+    lines += [f"| {name} | " + " | ".join(cell(row[c]) if c in row else "" for c in columns) + " |"
+              for name, row in rows.items()]
+    return "\n".join(lines)
+
+
 def save_figure(fig, path: Path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, bbox_inches="tight")

@@ -23,9 +23,12 @@ from sasmi.eval.config import EvalConfig
 from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
 from sasmi.eval.neighbours import copying_metrics
 from sasmi.eval.preservation import target_preservation
-from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, realism_markdown, tsne_figure
+from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, realism_markdown, statistics_markdown, \
+    tsne_figure
+from sasmi.labels import has_labels
 
 Log = Callable[[str], None]
+Statistics = Callable[[Path], dict]  # a folder → {statistic name: number}, e.g. sasmi.stats.chip_statistics
 
 
 def quiet(message: str) -> None:
@@ -51,13 +54,15 @@ def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi, batch: int = 
 
 
 def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, out_dir: str | os.PathLike,
-                     cfg: EvalConfig = EvalConfig(), log: Log = quiet, cache_dir: str | os.PathLike | None = None
-                     ) -> Report:
-    """φ of every folder, then `evaluate` and target preservation; figures go to out_dir.
+                     cfg: EvalConfig = EvalConfig(), log: Log = quiet, cache_dir: str | os.PathLike | None = None,
+                     statistics: Statistics | None = None) -> Report:
+    """φ of every folder, then `evaluate`, target preservation and (with `statistics`) the
+    image-statistics table; figures go to out_dir.
 
     Folder sizes are checked before any φ is computed, so bad input fails at once. The real
     set's φ is cached in `cache_dir` (sasmi.eval.cache) when given: it is the set that stays
-    the same from one evaluation to the next.
+    the same from one evaluation to the next. Target preservation runs on every set with
+    masks/ and labels.jsonl, the real set included when it has them.
     """
     minimum = 2 * (cfg.pr_k + 1)  # two real halves, each with more than k neighbours
     n_real = len(image_paths(real))
@@ -71,7 +76,21 @@ def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, ou
     features = [load_set(name, folder, encoder, cfg.batch, log=log) for name, folder in sets.items()]
     report = evaluate(real_set, features, out_dir, cfg, log)
     log("target preservation")
-    return report + target_preservation(sets, out_dir)
+    report += target_preservation({"real": Path(real), **sets} if has_labels(real) else sets, out_dir)
+    if statistics is not None:
+        log("image statistics")
+        report += image_statistics({"real": Path(real), **sets}, statistics)
+    return report
+
+
+def image_statistics(folders: dict[str, Path], statistics: Statistics) -> Report:
+    """The per-set image-statistics table: `statistics(folder)` → {column: number} for each set.
+
+    The hook for sasmi.stats.chip_statistics (written on another branch): `sasmi evaluate`
+    passes it as `statistics` to `evaluate_folders`, which calls this.
+    """
+    rows = {name: statistics(Path(folder)) for name, folder in folders.items()}
+    return Report({"image_statistics": rows}, (Section("Image statistics", statistics_markdown(rows)),))
 
 
 def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.PathLike,
