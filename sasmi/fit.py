@@ -165,7 +165,7 @@ def real_phi(encoder, folder: str | os.PathLike, size: int, batch: int = 32) -> 
     """(D,) float64 mean φ of the real chips in `folder`, brought to `size` as the GAN's training does."""
     import torch
 
-    from sasmi.evaluate import load_images
+    from sasmi.eval.features import load_images
 
     paths = list_images(folder)
     if not paths:
@@ -298,7 +298,7 @@ def trajectory_csv(result: FitResult) -> str:
 def loss_figure(result: FitResult, path: Path) -> None:
     from matplotlib.figure import Figure
 
-    from sasmi.evaluate import save_figure
+    from sasmi.eval.report import save_figure
 
     steps = [row["step"] for row in result.trajectory]
     fig = Figure(figsize=(9, 3.5))

@@ -34,7 +34,19 @@ def tile(image01: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
     return np.concatenate([gray, overlay], axis=1)
 
 
-def contact_sheet(folder: str | Path, out: str | Path, columns: int = 4, limit: int = 32) -> Path:
+def default_sheet_path(folder: str | Path) -> Path:
+    """Beside the folder, not in it: a sheet inside a set of chips would be read as one of them."""
+    folder = Path(folder).resolve()
+    return folder.parent / f"{folder.name}_sheet.png"
+
+
+def contact_sheet(folder: str | Path, out: str | Path | None = None, columns: int = 4, limit: int = 32) -> Path:
+    """Write a PNG of the first `limit` chips of `folder`, `columns` per row; returns its path
+    (default: `default_sheet_path(folder)`)."""
+    if columns < 1:
+        raise SasmiError(f"--columns {columns}: must be at least 1")
+    if limit < 1:
+        raise SasmiError(f"--limit {limit}: must be at least 1")
     folder = Path(folder)
     paths = list_images(folder)[:limit]
     if not paths:
@@ -42,7 +54,10 @@ def contact_sheet(folder: str | Path, out: str | Path, columns: int = 4, limit: 
     tiles = []
     for p in paths:
         mask_path = folder / "masks" / (p.stem + ".png")
-        mask = np.asarray(Image.open(mask_path)) if mask_path.is_file() else None
+        mask = None
+        if mask_path.is_file():
+            with Image.open(mask_path) as m:
+                mask = np.asarray(m)
         tiles.append(tile(read_gray(p), mask))
     h, w = max(t.shape[0] for t in tiles), max(t.shape[1] for t in tiles)
     rows = -(-len(tiles) // columns)
@@ -51,7 +66,7 @@ def contact_sheet(folder: str | Path, out: str | Path, columns: int = 4, limit: 
     for k, t in enumerate(tiles):
         r, c = divmod(k, columns)
         sheet[pad + r * (h + pad):pad + r * (h + pad) + t.shape[0], pad + c * (w + pad):pad + c * (w + pad) + t.shape[1]] = t
-    out = Path(out)
+    out = Path(out) if out is not None else default_sheet_path(folder)
     with atomic_path(out) as tmp:
         Image.fromarray(sheet).save(tmp, format="PNG")
     return out

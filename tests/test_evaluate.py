@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from sasmi import evaluate as ev
+from sasmi.eval import metrics as ev
+from sasmi.eval import neighbours as nb
 
 
 def exact_gaussian(rng, n, mean, cov):
@@ -110,13 +111,54 @@ def test_precision_recall():
 def test_nearest_and_copy_statistics():
     rng = np.random.default_rng(6)
     real = rng.standard_normal((50, 8))
-    idx, dist = ev.nearest(real[:5] + 1e-6, real, k=2)
+    idx, dist = nb.nearest(real[:5] + 1e-6, real, k=2)
     assert list(idx[:, 0]) == [0, 1, 2, 3, 4] and np.all(dist[:, 0] < 1e-5)
-    idx, _ = ev.nearest(real, real, k=1, exclude_self=True)
+    idx, _ = nb.nearest(real, real, k=1, exclude_self=True)
     assert np.all(idx[:, 0] != np.arange(50))
-    real_nn = ev.nearest(real, real, 1, exclude_self=True)[1][:, 0]
-    copies = ev.nearest(real[:20] + 1e-3 * rng.standard_normal((20, 8)), real, 1)[1][:, 0]
-    fresh = ev.nearest(rng.standard_normal((20, 8)), real, 1)[1][:, 0]
-    assert ev.copy_statistics(copies, real_nn)["fraction_below"] == 1.0
-    stats = ev.copy_statistics(fresh, real_nn)
+    real_nn = nb.nearest(real, real, 1, exclude_self=True)[1][:, 0]
+    copies = nb.nearest(real[:20] + 1e-3 * rng.standard_normal((20, 8)), real, 1)[1][:, 0]
+    fresh = nb.nearest(rng.standard_normal((20, 8)), real, 1)[1][:, 0]
+    assert nb.copy_statistics(copies, real_nn)["fraction_below"] == 1.0
+    stats = nb.copy_statistics(fresh, real_nn)
     assert stats["fraction_below"] < 0.3 and 0.5 < stats["median_ratio"] < 2.0
+
+
+def dense_distances(a, b):
+    """The N × N reference the blocked code replaced: every distance at once, in float64."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return np.sqrt(np.clip((a**2).sum(1)[:, None] + (b**2).sum(1)[None, :] - 2.0 * a @ b.T, 0.0, None))
+
+
+def dense_precision_recall(real, fake, k):
+    def radius(x):
+        d = dense_distances(x, x)
+        np.fill_diagonal(d, np.inf)
+        return np.partition(d, k - 1, axis=1)[:, k - 1]
+
+    d = dense_distances(fake, real)
+    return np.mean((d <= radius(real)[None, :]).any(1)), np.mean((d.T <= radius(fake)[None, :]).any(1))
+
+
+@pytest.mark.parametrize("block_bytes", [8 * 7 * 60, nb.BLOCK_BYTES])  # 7 rows a block, and one block
+def test_blocked_neighbours_equal_the_dense_matrix(monkeypatch, block_bytes):
+    monkeypatch.setattr(nb, "BLOCK_BYTES", block_bytes)
+    rng = np.random.default_rng(7)
+    real, fake = rng.standard_normal((60, 12)), rng.standard_normal((45, 12)) * 1.2 + 0.3
+    assert ev.precision_recall(real, fake, k=3) == pytest.approx(dense_precision_recall(real, fake, 3), abs=0)
+    assert 0 < ev.precision_recall(real, fake, k=3)[0] < 1  # not a trivial all-or-nothing case
+    d = dense_distances(fake, real)
+    idx, dist = nb.nearest(fake, real, k=4)
+    np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :4])
+    np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :4], rtol=1e-12)
+    d = dense_distances(real, real)
+    np.fill_diagonal(d, np.inf)
+    idx, dist = nb.nearest(real, real, k=2, exclude_self=True)
+    np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :2])
+    np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :2], rtol=1e-12)
+    # float32 pixels (blocked in the reference as well) give the float64 distances of the same values
+    pixels = rng.uniform(0, 1, (30, 200)).astype(np.float32)
+    idx, dist = nb.nearest(pixels[:9], pixels, k=3)
+    d = dense_distances(pixels[:9], pixels)
+    np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :3])
+    # (a point's distance to itself is √(round-off) ≈ 1e-7 in both, from the expansion |a|² + |b|² − 2ab)
+    np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :3], rtol=1e-9, atol=1e-6)

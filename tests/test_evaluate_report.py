@@ -11,10 +11,11 @@ import torch
 
 from gan import train
 from gan.autoencoder import AutoencoderConfig, load_encoder
-from sasmi import cli, sweeps
-from sasmi import evaluate as ev
+from sasmi import cli
+from sasmi.eval import features, phi_fid, preservation, sweeps
 from sasmi.errors import SasmiError
-from sasmi.images import write_gray, write_mask
+from sasmi.images import list_images, read_gray, write_gray, write_mask
+from sasmi.labels import TargetLabel
 from sasmi.scene import Scene, Sonar, Target
 
 CPU = torch.device("cpu")
@@ -79,9 +80,15 @@ def test_report_from_a_trained_run(data, capsys):
     out = data.root / "report"
     rc, err = evaluate_cli(capsys, "--real", data.real, "--set", f"renders={data.renders}",
                            "--set", f"shifted={data.shifted}", "--set", f"floor={data.floor}",
-                           "--phi", data.phi, "--out", out, "--bootstrap", 10, "--device", "cpu")
+                           "--phi", data.phi, "--out", out, "--bootstrap", 10, "--device", "cpu",
+                           "--cache", data.root / "cache")
     assert rc == 0, err
+    assert [p.name.split("-")[0] for p in (data.root / "cache").iterdir()] == ["real"]  # only the real φ is kept
     assert "fewer than φ's 1024 dimensions" in err  # 24 real images < 1024 φ dimensions
+    # without a terminal (no progress bars) each stage still says one line
+    stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("sasmi evaluate: [")]
+    assert [s.split(":")[0] for s in stages] == ["φ of real", "φ of renders", "φ of shifted", "φ of floor", "realism",
+                                                 "copying detector", "t-SNE", "target preservation", f"wrote {out}/report.md"]
 
     m = json.loads((out / "metrics.json").read_text())
     assert list(m["realism"]) == ["real→real", "renders", "shifted", "floor"]
@@ -118,12 +125,13 @@ def test_report_from_a_trained_run(data, capsys):
 
 def test_phi_features_from_paths_and_arrays_agree(data):
     encoder = load_encoder(data.phi)
-    paths = ev.list_images(data.real)[:5]
-    from_paths = ev.phi_features(encoder, paths, batch=2)
-    from_arrays = ev.phi_features(encoder, np.stack([ev.read_gray(p) for p in paths]), batch=3)
+    paths = list_images(data.real)[:5]
+    from_paths = features.phi_features(encoder, paths, batch=2)
+    from_arrays = features.phi_features(encoder, np.stack([read_gray(p) for p in paths]), batch=3)
     assert from_paths.shape == (5, 1024) and from_paths.dtype == np.float64
     np.testing.assert_allclose(from_paths, from_arrays, rtol=1e-5, atol=1e-6)
-    assert ev.phi_fid(data.real, data.real, encoder) == pytest.approx(0.0, abs=1e-9)
+    assert phi_fid(data.real, data.real, phi=encoder) == pytest.approx(0.0, abs=1e-9)
+    assert phi_fid(data.real, data.real, phi=data.phi) == pytest.approx(0.0, abs=1e-9)  # a run folder
 
 
 @pytest.mark.parametrize("case", ["missing real", "no equals", "empty name", "missing set dir", "twice", "reserved",
@@ -159,13 +167,14 @@ def test_bad_input_exits_2_with_one_line(data, capsys, case):
 def test_measure_image_known_answers():
     rng = np.random.default_rng(0)
     image, mask, label = chip(rng, 20.0, 24.0)
-    m = sweeps.measure_image(image, mask, [label])
+    label = TargetLabel.from_json(label)
+    m = preservation.measure_image(image, mask, [label])
     assert m["shadow_iou"] > 0.7 and m["centroid_errors"][0] < 0.7 and m["target_contrast"] > 1.5
-    shifted = sweeps.measure_image(np.roll(image, (3, 4), axis=(0, 1)), mask, [label])
+    shifted = preservation.measure_image(np.roll(image, (3, 4), axis=(0, 1)), mask, [label])
     assert shifted["centroid_errors"][0] == pytest.approx(5.0, abs=0.7)
-    erased = sweeps.measure_image(chip(rng, 20.0, 24.0, target=False)[0], mask, [label])
+    erased = preservation.measure_image(chip(rng, 20.0, 24.0, target=False)[0], mask, [label])
     assert erased["shadow_iou"] < 0.1 and erased["target_contrast"] < 1.3
-    s = sweeps.summarise([m, erased])
+    s = preservation.summarise([m, erased])
     assert s["images"] == 2 and s["targets"] == 2
 
 
@@ -174,11 +183,11 @@ def test_preservation_of_a_resized_translation(tmp_path):
     small = write_set(tmp_path / "small", 4, seed=5, labelled=True)
     big = tmp_path / "big"
     for path in sorted((small / "images").iterdir()):
-        image = ev.read_gray(path)
+        image = read_gray(path)
         write_gray(big / "images" / path.name, np.kron(image, np.ones((2, 2))))
     (big / "masks").symlink_to(small / "masks")
     (big / "labels.jsonl").symlink_to(small / "labels.jsonl")
-    report = sweeps.target_preservation({"small": small, "big": big}, tmp_path / "out")
+    report = preservation.target_preservation({"small": small, "big": big}, tmp_path / "out")
     tp = report.metrics["target_preservation"]
     assert tp["big"]["centroid_error_px"] < 1.5 and tp["big"]["shadow_iou"] > 0.7
     assert tp["small"]["centroid_error_px"] < 1.0
@@ -207,9 +216,16 @@ def test_pose_sweep_with_stand_in_renderer(tmp_path):
     kept = sweeps.pose_sweep(scene, FakeRender(), lambda images: images, tmp_path, cfg).metrics["pose_sweep"]
     moved_out = sweeps.pose_sweep(scene, FakeRender(), lambda images: np.roll(images, 4, axis=2), tmp_path / "shift",
                                   cfg).metrics["pose_sweep"]
+    assert [p["x"] for p in kept["translation"]] == pytest.approx([-1.5, -0.5, 0.5, 1.5])
+    assert [p["yaw"] for p in kept["rotation"]] == pytest.approx([0, 60, 120, 180])
     for pose, shifted in zip(kept["translation"] + kept["rotation"], moved_out["translation"] + moved_out["rotation"]):
+        # the render's numbers come from the render alone (whatever the translation does), and
+        # the stand-in puts its target where its label says
+        assert shifted["render"] == pose["render"]
+        assert pose["render"]["centroid_error_px"] < 1.0 and pose["render"]["shadow_iou"] > 0.5
         assert pose["translated"] == pose["render"]  # identity translation keeps every number
         assert shifted["translated"]["centroid_error_px"] == pytest.approx(4.0, abs=0.7)
+        assert shifted["translated"]["shadow_iou"] < 0.7 * pose["render"]["shadow_iou"]
     assert (tmp_path / "sweep_translation.png").is_file() and (tmp_path / "sweep_rotation.png").is_file()
 
 
@@ -220,7 +236,7 @@ def test_pose_sweep_needs_a_target():
 
 def test_preservation_on_the_renderer_output(render_set, tmp_path):
     # the label conventions (pixel_centre, bbox, mask values) as the real renderer writes them
-    tp = sweeps.target_preservation({"renders": render_set}, tmp_path).metrics["target_preservation"]["renders"]
+    tp = preservation.target_preservation({"renders": render_set}, tmp_path).metrics["target_preservation"]["renders"]
     assert tp["images"] == 8 and tp["lost"] < 0.25
     assert tp["centroid_error_px"] < 4.0 and tp["shadow_iou"] > 0.4
 

@@ -22,8 +22,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("sheet", help="contact sheet of a folder of chips (with mask outlines for a render set)")
     s.add_argument("folder", type=Path)
-    s.add_argument("--out", type=Path, help="PNG to write (default FOLDER/contact_sheet.png)")
-    s.add_argument("--columns", type=int, default=4)
+    s.add_argument("--out", type=Path, help="PNG to write (default FOLDER_sheet.png beside FOLDER)")
+    s.add_argument("--columns", type=int, default=4, help="chips per row (default 4)")
     s.add_argument("--limit", type=int, default=32, help="at most this many chips")
     s.set_defaults(run=run_sheet)
 
@@ -42,6 +42,6 @@ def run_render(args: argparse.Namespace) -> int:
 def run_sheet(args: argparse.Namespace) -> int:
     from sasmi.sheet import contact_sheet
 
-    out = contact_sheet(args.folder, args.out or args.folder / "contact_sheet.png", args.columns, args.limit)
+    out = contact_sheet(args.folder, args.out, args.columns, args.limit)
     print(f"wrote {out}")
     return 0

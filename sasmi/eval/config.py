@@ -1,0 +1,41 @@
+"""What `sasmi evaluate` computes and shows: one config for the whole evaluation.
+
+Stored in metrics.json (`config`), so a report says how it was made.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    bootstrap: int = 100  # FID resamples (and real splits) behind each ±; each costs one SVD of at most N×N
+    kid_subsets: int = 100  # KID is averaged over this many random subsets; ± is their std
+    kid_subset_size: int = 100  # images per KID subset, at most half the smaller set (Bińkowski et al. 2018)
+    pr_k: int = 3  # k of the k-NN balls that make the precision/recall manifolds (Kynkäänniemi et al. 2019)
+    copy_percentile: float = 5.0  # "closer to a real image than this percentile of real→real nearest distances"
+    neighbours_shown: int = 6  # generated images (rows) in each nearest-neighbour grid
+    neighbours_k: int = 4  # nearest real images shown per distance (pixel, φ)
+    tsne_per_set: int = 400  # points per set in the t-SNE; caps its run time at a few seconds per set
+    tsne_perplexity: float = 30.0  # lowered automatically for small sets (t-SNE needs perplexity < N / 3)
+    thumbnails_per_set: int = 3  # images drawn on the t-SNE map per set
+    batch: int = 32  # encoder batch
+    seed: int = 0  # every random choice (bootstrap, splits, subsets, shown images) derives from it
+
+
+@dataclass(frozen=True)
+class PreservationConfig:
+    margin: int = 8  # px searched around the labelled target and shadow: a shift of a few px is measured, not missed
+    smooth: float = 1.5  # px, Gaussian blur before thresholding: speckle changes from pixel to pixel
+    dark_fraction: float = 0.5  # "dark" = below this fraction of the median seafloor (mask 0) level
+    bright_percentile: float = 99.0  # "bright" = above this percentile of the seafloor level
+    examples: int = 6  # images drawn with their measurements per set
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    steps: int = 7  # poses per sweep (grid columns)
+    reach: float = 0.5  # the diagonal runs from −reach to +reach of the half chip in x and y
+    seed: int = 0  # preset draw used as the base scene (its first target is swept)
+    spp: int = 64  # samples per pixel of the sweep renders
+    batch: int = 8  # generator batch

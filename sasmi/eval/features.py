@@ -1,0 +1,100 @@
+"""Images and their φ features: the input of every metric.
+
+φ is the 1024-d code of the GAN's autoencoder (`gan.autoencoder.load_encoder`). Images go
+through `sasmi.preprocess.load_image` (short side to the encoder's size, centre crop),
+the same path as training, so the encoder sees what it was trained on.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from sasmi.errors import SasmiError
+from sasmi.images import list_images
+
+
+@dataclass(frozen=True)
+class FeatureSet:
+    name: str
+    folder: Path
+    images: np.ndarray  # (N, S, S) float32 in [0, 1], exactly what the encoder saw
+    phi: np.ndarray  # (N, D) float64
+
+
+def as_encoder(phi, device="cpu"):
+    """An encoder as is, or the encoder of an autoencoder run folder."""
+    if isinstance(phi, (str, os.PathLike)):
+        from gan.autoencoder import load_encoder
+
+        if not Path(phi).is_dir():
+            raise SasmiError(f"--phi {phi}: not a folder (expected an autoencoder run)")
+        return load_encoder(phi, device=device)
+    return phi
+
+
+def load_images(paths: Sequence[str | os.PathLike], size: int) -> np.ndarray:
+    """(N, size, size) float32 in [0, 1]; a file that cannot be read is a SasmiError naming it."""
+    from sasmi.preprocess import load_image  # imports torch: only when images are read
+
+    out = np.empty((len(paths), size, size), dtype=np.float32)
+    for i, path in enumerate(tqdm(paths, desc="read", unit="img", leave=False, disable=None)):
+        out[i] = load_image(path, size)
+    return out
+
+
+def phi_features(encoder, images: np.ndarray | Sequence[str | os.PathLike], batch: int = 32) -> np.ndarray:
+    """φ of image files or of an (N, H, W) array in [0, 1] → (N, D) float64.
+
+    Images are brought to `encoder.image_size` as in training. The encoder is put in eval
+    mode so that φ of an image does not depend on the batch it is in.
+    """
+    import torch
+
+    from sasmi.preprocess import fit_image, to_batch
+
+    size = encoder.image_size
+    if isinstance(images, np.ndarray):
+        images = np.stack([fit_image(im, size) for im in images]) if images.shape[1:] != (size, size) else images
+    else:
+        images = load_images(images, size)
+    if len(images) == 0:
+        raise SasmiError("phi_features: no images")
+    encoder.eval()
+    device = next(encoder.parameters()).device
+    feats = []
+    with torch.no_grad():
+        for start in tqdm(range(0, len(images), batch), desc="φ", unit="batch", leave=False, disable=None):
+            x = to_batch(images[start:start + batch], device)  # (B, 1, S, S) in [-1, 1]
+            phi = encoder(x)  # (B, D)
+            assert phi.ndim == 2 and phi.shape[0] == x.shape[0], phi.shape
+            feats.append(phi.double().cpu().numpy())
+    return np.concatenate(feats)  # (N, D)
+
+
+def image_paths(folder: str | os.PathLike) -> list[Path]:
+    paths = list_images(folder)
+    if not paths:
+        raise SasmiError(f"{folder}: no images (png, jpg, tif, tiff, npy) in it")
+    return paths
+
+
+def load_set(name: str, folder: str | os.PathLike, encoder, batch: int = 32, cache_dir: str | os.PathLike | None = None,
+             log: Callable[[str], None] = lambda message: None) -> FeatureSet:
+    """Images and φ of a folder; φ is read from (or written to) `cache_dir` when one is given."""
+    from sasmi.eval import cache
+
+    paths = image_paths(folder)
+    cached = cache.cache_file(cache_dir, folder, paths, encoder) if cache_dir is not None else None
+    phi = cache.read(cached, len(paths)) if cached is not None and cached.is_file() else None
+    log(f"φ of {name}: {len(paths)} images from {folder}" + (f" (φ from the cache {cached})" if phi is not None else ""))
+    images = load_images(paths, encoder.image_size)
+    if phi is None:
+        phi = phi_features(encoder, images, batch)
+        if cached is not None:
+            cache.write(cached, phi)
+    return FeatureSet(name, Path(folder), images, phi)

@@ -1,0 +1,177 @@
+"""Realism metrics: pure functions of φ feature arrays (N, D), numpy in float64.
+
+FID with bootstrap and matched-size errors, KID, improved precision/recall. Nothing here
+reads files, draws or knows about image sets. Definitions: docs/evaluate.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from tqdm import tqdm
+
+from sasmi.errors import SasmiError
+from sasmi.eval.neighbours import kth_neighbour_radius, within_any_ball
+
+
+@dataclass(frozen=True)
+class Estimate:
+    value: float
+    std: float  # spread of the resampled estimates (bootstrap, splits or subsets; see docs/evaluate.md)
+
+
+def _as_features(feats: np.ndarray, minimum: int, what: str) -> np.ndarray:
+    x = np.asarray(feats, dtype=np.float64)
+    if x.ndim != 2 or len(x) < minimum:
+        raise SasmiError(f"{what}: needs at least {minimum} feature vectors (N, D), got shape {x.shape}")
+    return x
+
+
+def _cov_factor(x: np.ndarray) -> np.ndarray:
+    """(N, D) → F (r, D) with Fᵀ F = cov(x) (ddof 1) and r = min(N, D) rows.
+
+    For N > D, the R of a QR decomposition of the centred data: an exact factor, where a
+    symmetric eigen square root would add √(round-off) for every near-zero eigenvalue.
+    """
+    n, d = x.shape
+    centred = (x - x.mean(axis=0)) / math.sqrt(n - 1)
+    return centred if n <= d else np.linalg.qr(centred, mode="r")
+
+
+def fid(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
+    """Fréchet distance between Gaussians fitted to two feature sets, in float64.
+
+    ‖μa − μb‖² + tr Σa + tr Σb − 2 tr (Σa^½ Σb Σa^½)^½. With Σa = Faᵀ Fa and Σb = Fbᵀ Fb,
+    Σa^½ Σb Σa^½ has the nonzero eigenvalues of C Cᵀ, C = Fa Fbᵀ (r_a × r_b), so the last
+    trace is the sum of C's singular values (the square roots of the eigenvalues of the
+    symmetric C Cᵀ, computed stably by SVD). No complex parts, no D×D sqrtm, exact when
+    N < D (rank-deficient covariances), and at most N×N work per call.
+    """
+    a = _as_features(feats_a, 2, "fid")
+    b = _as_features(feats_b, 2, "fid")
+    if a.shape[1] != b.shape[1]:
+        raise SasmiError(f"fid: feature dimensions differ ({a.shape[1]} vs {b.shape[1]})")
+    fa, fb = _cov_factor(a), _cov_factor(b)
+    tr_sqrt = np.linalg.svd(fa @ fb.T, compute_uv=False).sum()
+    value = np.sum((a.mean(0) - b.mean(0)) ** 2) + np.sum(fa**2) + np.sum(fb**2) - 2.0 * tr_sqrt
+    return max(float(value), 0.0)  # a squared distance; only round-off makes it negative
+
+
+def one_blas_thread():
+    """Context: BLAS on one thread. The metrics are many small (≤ N×N) products; on a busy
+    machine, OpenBLAS threads waiting for a core made them 50× slower (measured, 2 cores)."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def fid_bootstrap(feats_a: np.ndarray, feats_b: np.ndarray, n: int = 100, seed: int = 0) -> Estimate:
+    """FID of the full sets ± the std of FIDs of `n` bootstrap resamples (both sets resampled)."""
+    a, b = np.asarray(feats_a, np.float64), np.asarray(feats_b, np.float64)
+    rng = np.random.default_rng(seed)
+    with one_blas_thread():
+        reps = [fid(a[rng.integers(0, len(a), len(a))], b[rng.integers(0, len(b), len(b))])
+                for _ in tqdm(range(n), desc="FID bootstrap", leave=False, disable=None)]
+    return Estimate(fid(a, b), float(np.std(reps, ddof=1)) if n > 1 else math.nan)
+
+
+def fid_real_split(feats_real: np.ndarray, n: int = 100, seed: int = 0) -> Estimate:
+    """Reference FID of real vs real: mean ± std over `n` random splits into two disjoint halves."""
+    x = _as_features(feats_real, 4, "fid_real_split")
+    rng = np.random.default_rng(seed)
+    half = len(x) // 2
+    reps = []
+    with one_blas_thread():
+        for _ in tqdm(range(n), desc="FID real halves", leave=False, disable=None):
+            order = rng.permutation(len(x))
+            reps.append(fid(x[order[:half]], x[order[half:2 * half]]))
+    return Estimate(float(np.mean(reps)), float(np.std(reps, ddof=1)) if n > 1 else math.nan)
+
+
+def fid_ratio_matched(feats_set: np.ndarray, feats_real: np.ndarray, n: int = 100, seed: int = 0) -> Estimate:
+    """FID(set, real) / FID(real, real) at equal sample sizes, so FID's small-sample bias cancels.
+
+    Each of `n` replicates splits the real set into random halves A and B, draws
+    m = min(|A|, |set|) images from the set and from A, and computes FID(set_m, B) and
+    FID(A_m, B). Value: mean of the first / mean of the second; ± the std of the
+    per-replicate ratios.
+    """
+    x = _as_features(feats_set, 2, "fid_ratio_matched (set)")
+    real = _as_features(feats_real, 4, "fid_ratio_matched (real)")
+    rng = np.random.default_rng(seed)
+    half = len(real) // 2
+    m = min(half, len(x))
+    num, den = [], []
+    with one_blas_thread():
+        for _ in tqdm(range(n), desc="FID ratio", leave=False, disable=None):
+            order = rng.permutation(len(real))
+            a, b = real[order[:m]], real[order[half:2 * half]]
+            num.append(fid(x[rng.choice(len(x), m, replace=False)], b))
+            den.append(fid(a, b))
+    num, den = np.array(num), np.array(den)
+    if np.mean(den) <= 0:
+        return Estimate(math.nan, math.nan)
+    ratios = num / np.where(den > 0, den, np.nan)
+    return Estimate(float(np.mean(num) / np.mean(den)), float(np.nanstd(ratios, ddof=1)) if n > 1 else math.nan)
+
+
+def _poly_kernel(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return (x @ y.T / x.shape[1] + 1.0) ** 3
+
+
+def mmd2_unbiased(x: np.ndarray, y: np.ndarray) -> float:
+    """Unbiased MMD² with the cubic polynomial kernel k(x, y) = (xᵀy / D + 1)³; x, y (m, D)."""
+    m = len(x)
+    kxx, kyy, kxy = _poly_kernel(x, x), _poly_kernel(y, y), _poly_kernel(x, y)
+    within = (kxx.sum() - np.trace(kxx) + kyy.sum() - np.trace(kyy)) / (m * (m - 1))
+    return float(within - 2.0 * kxy.mean())
+
+
+def kid(feats_a: np.ndarray, feats_b: np.ndarray, subsets: int = 100, subset_size: int = 100,
+        seed: int = 0) -> Estimate:
+    """Kernel inception distance: mean ± std of unbiased MMD² over random equal-size subsets.
+
+    Unbiased, so two samples of one distribution give ≈ 0 (and may give < 0) at any size.
+    Subsets hold at most half the smaller set, so that they differ and the ± means something.
+    """
+    a = _as_features(feats_a, 4, "kid")
+    b = _as_features(feats_b, 4, "kid")
+    m = min(subset_size, min(len(a), len(b)) // 2)
+    rng = np.random.default_rng(seed)
+    with one_blas_thread():
+        reps = [mmd2_unbiased(a[rng.choice(len(a), m, replace=False)], b[rng.choice(len(b), m, replace=False)])
+                for _ in range(subsets)]
+    return Estimate(float(np.mean(reps)), float(np.std(reps, ddof=1)) if subsets > 1 else math.nan)
+
+
+def kid_real_split(feats_real: np.ndarray, subsets: int = 100, subset_size: int = 100, seed: int = 0) -> Estimate:
+    """KID of real vs real: each subset pairs two disjoint random draws from the real set."""
+    x = _as_features(feats_real, 8, "kid_real_split")
+    m = min(subset_size, len(x) // 4)  # as in kid(): at most half of each half
+    rng = np.random.default_rng(seed)
+    reps = []
+    with one_blas_thread():
+        for _ in range(subsets):
+            order = rng.permutation(len(x))
+            reps.append(mmd2_unbiased(x[order[:m]], x[order[m:2 * m]]))
+    return Estimate(float(np.mean(reps)), float(np.std(reps, ddof=1)) if subsets > 1 else math.nan)
+
+
+def precision_recall(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3) -> tuple[float, float]:
+    """Improved precision and recall (Kynkäänniemi et al. 2019) with k-NN ball manifolds.
+
+    precision: fraction of fake samples inside some real sample's ball (radius = distance
+    to its k-th nearest real neighbour); recall: the same with the roles swapped.
+    """
+    real = _as_features(feats_real, k + 1, "precision_recall (real)")
+    fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
+    # in blocks of rows (sasmi.eval.neighbours): memory stays bounded at any set size
+    precision = np.mean(within_any_ball(fake, real, kth_neighbour_radius(real, k)))
+    recall = np.mean(within_any_ball(real, fake, kth_neighbour_radius(fake, k)))
+    return float(precision), float(recall)
+
+
+def rms(feats: np.ndarray) -> float:
+    """Root mean square entry: divides φ so that xᵀx / D ≈ 1, the regime the KID kernel is made for."""
+    return float(np.sqrt(np.mean(np.asarray(feats, np.float64) ** 2))) or 1.0

@@ -1,0 +1,168 @@
+"""The evaluation as one call: φ of every folder, realism, copying, t-SNE and target
+preservation, as a Report that `report.write_report` writes (what `sasmi evaluate` runs).
+
+Pose sweeps need a renderer and a generator and are added by the caller
+(`sweeps.pose_sweep_from_runs`).
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from sasmi.errors import SasmiError
+from sasmi.eval import metrics
+from sasmi.eval.config import EvalConfig
+from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
+from sasmi.eval.neighbours import copying_metrics
+from sasmi.eval.preservation import target_preservation
+from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, realism_markdown, statistics_markdown, \
+    tsne_figure
+from sasmi.labels import has_labels
+
+Log = Callable[[str], None]
+Statistics = Callable[[Path], dict]  # a folder → {statistic name: number}, e.g. sasmi.stats.chip_statistics
+
+
+def quiet(message: str) -> None:
+    """The default log of the Python API: says nothing."""
+
+
+class StderrLog:
+    """One line per stage on stderr, with the seconds since the start: progress that
+    survives without a terminal (tqdm bars only draw on one)."""
+
+    def __init__(self, prefix: str = "sasmi evaluate"):
+        self.prefix, self.start = prefix, time.perf_counter()
+
+    def __call__(self, message: str) -> None:
+        print(f"{self.prefix}: [{time.perf_counter() - self.start:6.1f} s] {message}", file=sys.stderr, flush=True)
+
+
+def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi, batch: int = 32, device="cpu") -> float:
+    """One call: φ-FID between two image folders; `phi` an autoencoder run folder or an encoder
+    (gan.autoencoder.load_encoder)."""
+    encoder = as_encoder(phi, device)
+    return metrics.fid(load_set("real", real, encoder, batch).phi, load_set("fake", fake, encoder, batch).phi)
+
+
+def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, out_dir: str | os.PathLike,
+                     cfg: EvalConfig = EvalConfig(), log: Log = quiet, cache_dir: str | os.PathLike | None = None,
+                     statistics: Statistics | None = None) -> Report:
+    """φ of every folder, then `evaluate`, target preservation and (with `statistics`) the
+    image-statistics table; figures go to out_dir.
+
+    Folder sizes are checked before any φ is computed, so bad input fails at once. The real
+    set's φ is cached in `cache_dir` (sasmi.eval.cache) when given: it is the set that stays
+    the same from one evaluation to the next. Target preservation runs on every set with
+    masks/ and labels.jsonl, the real set included when it has them.
+    """
+    minimum = 2 * (cfg.pr_k + 1)  # two real halves, each with more than k neighbours
+    n_real = len(image_paths(real))
+    if n_real < minimum:
+        raise SasmiError(f"{real}: {n_real} real images; at least {minimum} are needed")
+    for name, folder in sets.items():
+        n = len(image_paths(folder))
+        if n <= cfg.pr_k:
+            raise SasmiError(f"{folder}: {n} images; at least {cfg.pr_k + 1} are needed")
+    real_set = load_set("real", real, encoder, cfg.batch, cache_dir, log)
+    features = [load_set(name, folder, encoder, cfg.batch, log=log) for name, folder in sets.items()]
+    report = evaluate(real_set, features, out_dir, cfg, log)
+    log("target preservation")
+    report += target_preservation({"real": Path(real), **sets} if has_labels(real) else sets, out_dir)
+    if statistics is not None:
+        log("image statistics")
+        report += image_statistics({"real": Path(real), **sets}, statistics)
+    return report
+
+
+def image_statistics(folders: dict[str, Path], statistics: Statistics) -> Report:
+    """The per-set image-statistics table: `statistics(folder)` → {column: number} for each set.
+
+    The hook for sasmi.stats.chip_statistics (written on another branch): `sasmi evaluate`
+    passes it as `statistics` to `evaluate_folders`, which calls this.
+    """
+    rows = {name: statistics(Path(folder)) for name, folder in folders.items()}
+    return Report({"image_statistics": rows}, (Section("Image statistics", statistics_markdown(rows)),))
+
+
+def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.PathLike,
+             cfg: EvalConfig = EvalConfig(), log: Log = quiet) -> Report:
+    """Realism table, copying detector and t-SNE of `sets` against `real`; figures go to out_dir."""
+    out_dir = Path(out_dir)
+    dim = real.phi.shape[1]
+    warnings = [f"{s.name}: {len(s.phi)} images, fewer than φ's {dim} dimensions: its covariance is "
+                f"rank-deficient, so FID is biased up and noisy; trust KID and the ratio, not the raw FID"
+                for s in (real, *sets) if len(s.phi) < dim]
+    if len(real.phi) // 2 < dim <= len(real.phi):
+        warnings.append(f"{REAL_VS_REAL}: each half has {len(real.phi) // 2} images, fewer than φ's {dim} "
+                        f"dimensions (see above)")
+    with metrics.one_blas_thread():
+        log(f"realism: FID ({cfg.bootstrap} resamples), KID, precision/recall of {len(sets)} sets")
+        realism = realism_table(real, sets, cfg)
+        log("copying detector: nearest neighbours")
+        copying = copying_metrics(real, sets, cfg, out_dir)
+        log("t-SNE")
+        tsne_section = tsne_figure(*tsne_map(real, sets, cfg), out_dir / "tsne.png")
+    result = {"config": asdict(cfg), "phi_dim": dim, "image_size": int(real.images.shape[-1]),
+              "real": {"dir": str(real.folder), "n": len(real.phi)},
+              "sets": {s.name: {"dir": str(s.folder), "n": len(s.phi)} for s in sets},
+              "realism": realism, "copying": copying, "warnings": warnings}
+    notes = "".join(f"\n\n> **Warning.** {w}" for w in warnings)
+    return Report(result, (
+        Section("Realism in φ space", realism_markdown(realism, real) + notes),
+        Section("Copying detector: nearest real images", copying_markdown(copying, sets, cfg)),
+        tsne_section,
+    ))
+
+
+def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig) -> dict:
+    """FID ± (bootstrap), its matched-size ratio to real→real, KID ± and precision/recall per set."""
+    scale = metrics.rms(real.phi)  # one scalar for all sets: FID ratios and precision/recall do not change
+    order = np.random.default_rng(cfg.seed).permutation(len(real.phi))
+    half_a, half_b = real.phi[order[:len(order) // 2]], real.phi[order[len(order) // 2:]]
+    reference = metrics.fid_real_split(real.phi, cfg.bootstrap, cfg.seed)
+    k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
+    precision, recall = metrics.precision_recall(half_a, half_b, cfg.pr_k)
+    rows = {REAL_VS_REAL: {"n": [len(half_a), len(half_b)], "fid": reference.value, "fid_std": reference.std,
+                           "fid_ratio": 1.0, "fid_ratio_std": math.nan, "kid": k.value, "kid_std": k.std,
+                           "precision": precision, "recall": recall}}
+    for i, s in enumerate(tqdm(sets, desc="realism", unit="set", leave=False, disable=None)):
+        seed = cfg.seed + 1 + i
+        f = metrics.fid_bootstrap(s.phi, real.phi, cfg.bootstrap, seed)
+        ratio = metrics.fid_ratio_matched(s.phi, real.phi, cfg.bootstrap, seed)
+        k = metrics.kid(s.phi / scale, real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, seed)
+        precision, recall = metrics.precision_recall(real.phi, s.phi, cfg.pr_k)
+        rows[s.name] = {"n": len(s.phi), "fid": f.value, "fid_std": f.std, "fid_ratio": ratio.value,
+                        "fid_ratio_std": ratio.std, "kid": k.value, "kid_std": k.std,
+                        "precision": precision, "recall": recall}
+    return rows
+
+
+def tsne_map(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig
+             ) -> tuple[list[tuple[FeatureSet, np.ndarray, np.ndarray]], np.ndarray, float]:
+    """2-D t-SNE of φ (after PCA to ≤ 50 dimensions) of at most `tsne_per_set` images per set.
+
+    Returns the groups (set, indices of its points, positions among them shown as
+    thumbnails), the points (n, 2) of all groups in order, and the perplexity used.
+    """
+    from sklearn.decomposition import PCA
+    from sklearn.manifold import TSNE
+
+    rng = np.random.default_rng(cfg.seed)
+    chosen = [(s, np.sort(rng.choice(len(s.phi), min(cfg.tsne_per_set, len(s.phi)), replace=False)))
+              for s in (real, *sets)]
+    x = np.concatenate([s.phi[idx] for s, idx in chosen])  # (n, D)
+    x = PCA(n_components=min(50, *x.shape), random_state=cfg.seed).fit_transform(x)
+    perplexity = min(cfg.tsne_perplexity, max(2.0, (len(x) - 1) / 3.0))
+    xy = TSNE(perplexity=perplexity, init="pca", random_state=cfg.seed).fit_transform(x)  # (n, 2)
+    groups = [(s, idx, rng.choice(len(idx), min(cfg.thumbnails_per_set, len(idx)), replace=False))
+              for s, idx in chosen]
+    return groups, xy, perplexity
