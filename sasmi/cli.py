@@ -7,10 +7,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sasmi.commands import atr_cmd, crosscheck_cmd, evaluate_cmd, fit_cmd, generate_cmd, render_cmd, train_cmd, translate_cmd
+from sasmi.commands import (atr_cmd, crosscheck_cmd, evaluate_cmd, fit_cmd, generate_cmd, render_cmd, split_cmd,
+                            stats_cmd, train_cmd, translate_cmd)
 from sasmi.errors import SasmiError
 
-COMMANDS = (render_cmd, train_cmd, translate_cmd, generate_cmd, evaluate_cmd, crosscheck_cmd, fit_cmd, atr_cmd)
+COMMANDS = (render_cmd, train_cmd, translate_cmd, generate_cmd, evaluate_cmd, crosscheck_cmd, fit_cmd, split_cmd,
+            stats_cmd, atr_cmd)
 
 
 def build_parser() -> argparse.ArgumentParser:
