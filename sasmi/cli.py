@@ -11,10 +11,11 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 
 from sasmi.cli_types import apply_limits
 from sasmi.commands import crosscheck_cmd, evaluate_cmd, fit_cmd, generate_cmd, render_cmd, train_cmd, translate_cmd
-from sasmi.errors import SasmiError, first_line, user_error_message
+from sasmi.errors import first_line, one_line, user_error_message
 from sasmi.limits import check_render_cost
 
 COMMANDS = (render_cmd, train_cmd, translate_cmd, generate_cmd, evaluate_cmd, crosscheck_cmd, fit_cmd)
@@ -26,7 +27,8 @@ class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: the usage block is in --help, not in every error."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {first_line(message, 1000)} (see {self.prog} --help)\n")
+        command = " ".join(self.prog.split()[:2])  # "sasmi train", also for "sasmi train sasgan"
+        self.exit(2, f"{command}: error: {first_line(message, 1000)} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,16 +46,24 @@ def check_flag_combinations(args: argparse.Namespace) -> None:
         check_render_cost(size, spp)
 
 
-def _prog(args: argparse.Namespace) -> str:
-    return " ".join(["sasmi", args.command] + ([args.kind] if getattr(args, "kind", None) else []))
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"sasmi: warning: {one_line(message, 300)}", file=sys.stderr if file is None else file)
 
 
 def main(argv: list[str] | None = None) -> int:
+    with warnings.catch_warnings():  # library warnings as one line each, not two with a source line
+        warnings.showwarning = _one_line_warning
+        # torch.load warns about the pickle protocol of any file it then refuses: noise beside our one line
+        warnings.filterwarnings("ignore", message="Detected pickle protocol")
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad flag (2, already printed): a code, like every other outcome
         return e.code if isinstance(e.code, int) else 2
-    prog = _prog(args)
+    prog = f"sasmi {args.command}"
     try:
         check_flag_combinations(args)
         return args.run(args) or 0

@@ -19,7 +19,7 @@ from typing import Any, Callable
 from sasmi import limits
 from sasmi.limits import Range
 
-INPUT_FOLDERS = ("--real", "--renders", "--in", "--phi", "--generator")  # always existing folders
+INPUT_FOLDERS = ("--real", "--renders", "--in")  # always existing folders (run folders: their loaders check)
 OUTPUTS = ("--out",)  # a file or folder to create: its nearest existing parent must be a writable folder
 
 
@@ -72,7 +72,7 @@ def flag(name: str) -> Callable[[str], Any]:
 def existing_folder(text: str) -> Path:
     path = Path(text)
     if not path.exists():
-        raise argparse.ArgumentTypeError(f"{text}: no such folder")
+        raise argparse.ArgumentTypeError(f"{text}: not a folder (it does not exist)")
     if not path.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: not a folder")
     return path

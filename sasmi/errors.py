@@ -53,6 +53,19 @@ def oserror_message(e: OSError) -> str:
     return f"{name}: {what}" if name else what
 
 
+def _checkpoint_problem(e: BaseException) -> str:
+    """What torch.load's failure means for the user; its own messages are pages about weights_only."""
+    if isinstance(e, EOFError):
+        return "empty or cut short"
+    if type(e).__name__ == "UnpicklingError":
+        return "torch's weights-only loader refused it: not plain tensors, it may carry code"
+    if isinstance(e, RuntimeError) and "zip archive" in str(e):
+        return "truncated, or not a torch file"
+    if isinstance(e, OSError):
+        return oserror_message(e)
+    return f"{type(e).__name__}: {first_line(e, 160)}"
+
+
 def user_error_message(e: BaseException) -> str | None:
     """One line naming the file or field if `e` was caused by user input, else None (a bug)."""
     if isinstance(e, SasmiError):
@@ -61,8 +74,7 @@ def user_error_message(e: BaseException) -> str | None:
     in_torch_load = any(f.endswith("torch/serialization.py") and fn == "load" for f, fn, _ in frames)
     if in_torch_load:  # truncated, empty, random bytes, a pickle carrying code, a disk error while reading
         path = _path_local([fr for fr in frames if fr[0].endswith("torch/serialization.py")], ("f",))
-        return (f"{path or 'checkpoint'}: not a loadable sasmi checkpoint ({type(e).__name__}: {first_line(e, 160)}); "
-                "train the run again or point to another run")
+        return f"{path or 'checkpoint'}: not a loadable sasmi checkpoint ({_checkpoint_problem(e)})"
     if isinstance(e, OSError):
         return oserror_message(e)
     if isinstance(e, RuntimeError) and any(fn == "load_state_dict" and f.endswith("torch/nn/modules/module.py")

@@ -18,6 +18,13 @@ from dataclasses import dataclass
 from sasmi.errors import SasmiError
 
 
+def _number(v: float | None) -> str:
+    """4294967295 stays whole, 1e-12 stays short."""
+    if v is not None and float(v).is_integer() and abs(v) < 1e12:
+        return str(int(v))
+    return f"{v:g}" if v is not None else ""
+
+
 @dataclass(frozen=True)
 class Range:
     """lo <= value <= hi (ends optional); `kind` int or float; `why` explains the bound."""
@@ -31,12 +38,13 @@ class Range:
         parts = []
         if self.kind is int and self.multiple > 1:
             parts.append(f"a multiple of {self.multiple}")
+        lo, hi = _number(self.lo), _number(self.hi)
         if self.lo is not None and self.hi is not None:
-            parts.append(f"{self.lo:g} to {self.hi:g}")
+            parts.append(f"{lo} to {hi}")
         elif self.lo is not None:
-            parts.append(f">= {self.lo:g}")
+            parts.append(f">= {lo}")
         elif self.hi is not None:
-            parts.append(f"<= {self.hi:g}")
+            parts.append(f"<= {hi}")
         text = ", ".join(parts) or "any finite number"
         return f"{text}; {self.why}" if self.why else text
 
