@@ -515,3 +515,85 @@ def test_a_bug_is_one_line_and_exit_1(capsys, monkeypatch):
     monkeypatch.setenv("SASMI_DEBUG", "1")
     with pytest.raises(KeyError):
         main(["render", str(CYLINDER), "--out", "/tmp/unused-sasmi-out"])
+
+
+# ------------------------------------------------------------------------------------------ image files
+
+def _png_bytes(shape=(64, 64)) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    Image.fromarray(np.random.default_rng(0).integers(0, 255, shape, dtype=np.uint8)).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _npy_header_only(path: Path) -> None:
+    with open(path, "wb") as f:  # claims 10^10 float32 values, holds 64 bytes
+        np.lib.format.write_array_header_1_0(f, {"descr": "<f4", "fortran_order": False, "shape": (100000, 100000)})
+        f.write(b"\0" * 64)
+
+
+BAD_IMAGES = {
+    "bomb.png": (lambda p: Image.new("1", (20000, 20000)).save(p), "decompression bomb"),
+    "big.png": (lambda p: Image.new("1", (9000, 9000)).save(p), "too large"),
+    "truncated.png": (lambda p: p.write_bytes(_png_bytes()[:-200]), "cannot read image"),
+    "half.png": (lambda p: p.write_bytes(_png_bytes()[: len(_png_bytes()) // 2]), "cannot read image"),
+    "empty.png": (lambda p: p.write_bytes(b""), "cannot read image"),
+    "text.jpg": (lambda p: p.write_text("hello"), "cannot read image"),
+    "nan.npy": (lambda p: np.save(p, np.full((8, 8), np.nan, np.float32)), "NaN"),
+    "inf.npy": (lambda p: np.save(p, np.full((8, 8), np.inf)), "NaN or infinite"),
+    "nan.tiff": (lambda p: __import__("tifffile").imwrite(p, np.full((8, 8), np.nan, np.float32)), "NaN"),
+    "complex.npy": (lambda p: np.save(p, np.zeros((8, 8), np.complex64)), "pixel type"),
+    "object.npy": (lambda p: np.save(p, np.array([{}, 1], dtype=object), allow_pickle=True), "cannot read image"),
+    "header.npy": (_npy_header_only, "cannot read image"),  # the mapped file is shorter than its header says
+    "shape.npy": (lambda p: np.save(p, np.zeros((2, 3, 4, 5), np.float32)), "2-D"),
+    "zero-width.npy": (lambda p: np.save(p, np.zeros((0, 8), np.float32)), "2-D"),
+    "folder.png": (lambda p: p.mkdir(), "not a regular file"),
+    "dev-zero.png": (lambda p: p.symlink_to("/dev/zero"), "not a regular file"),
+    "missing.png": (lambda p: None, "cannot read image"),
+}
+
+
+@pytest.mark.parametrize("name", BAD_IMAGES)
+def test_unusable_image_is_a_one_line_error_naming_it(tmp_path, name):
+    from sasmi.errors import SasmiError
+    from sasmi.images import read_gray
+
+    make, words = BAD_IMAGES[name]
+    make(tmp_path / name)
+    with pytest.raises(SasmiError) as e:
+        read_gray(tmp_path / name)
+    assert name in str(e.value) and words in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("mode", ["1", "L", "LA", "P", "RGB", "RGBA", "CMYK", "I", "I;16", "F"])
+def test_every_pil_mode_reads_as_gray_in_unit_range(tmp_path, mode):
+    from sasmi.images import read_gray
+
+    path = tmp_path / ("x.tiff" if mode in ("CMYK", "F", "I") else "x.png")
+    Image.new(mode, (8, 6)).save(path)
+    a = read_gray(path)
+    assert a.shape == (6, 8) and a.dtype == np.float32 and 0 <= a.min() <= a.max() <= 1
+
+
+def test_read_folder_skips_unusable_with_one_line_each(tmp_path, capsys):
+    from sasmi.errors import SasmiError
+    from sasmi.images import read_folder
+
+    good = _png_bytes((16, 16))
+    for name in ("a.png", "b.png"):
+        (tmp_path / name).write_bytes(good)
+    for name in ("bomb.png", "nan.npy", "truncated.png"):
+        BAD_IMAGES[name][0](tmp_path / name)
+    paths, images = read_folder(tmp_path)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert [p.name for p in paths] == ["a.png", "b.png"] and all(i.shape == (16, 16) for i in images)
+    assert len(err) == 4 and "skipped 3 of 5 images" in err[-1], err
+    assert all(line.startswith("sasmi: warning: skipped ") for line in err)
+    for name in ("a.png", "b.png"):
+        (tmp_path / name).unlink()
+    with pytest.raises(SasmiError, match="no usable image"):
+        read_folder(tmp_path)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SasmiError, match="no image files"):
+        read_folder(tmp_path / "empty")
