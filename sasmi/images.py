@@ -1,25 +1,33 @@
 """Grayscale image IO shared by the renderer, the GAN and the evaluation.
 
 Every reader returns float32 arrays of shape (H, W) in [0, 1]; every writer is atomic
-(temp file + rename) so a killed job never leaves a truncated image behind.
+(temp file + rename) so a killed job never leaves a truncated image behind. A file that
+cannot be a chip (truncated, a decompression bomb, NaN pixels, /dev/zero) is a SasmiError
+naming it; `read_folder` skips such files with one warning line each.
 """
 from __future__ import annotations
 
 import contextlib
+import math
 import os
+import stat
+import sys
 import tempfile
+import warnings
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator, Sequence, TypeVar
 
 import numpy as np
 from PIL import Image
 
-from sasmi.errors import SasmiError
+from sasmi.errors import SasmiError, first_line, one_line
+from sasmi.limits import IMAGE_MAX_BYTES, IMAGE_MAX_PIXELS
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy")
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 FORMATS = {"png": ".png", "tiff16": ".tiff", "npy": ".npy"}
+T = TypeVar("T")
 
 
 @contextlib.contextmanager
@@ -33,9 +41,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; give the file the usual permissions
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(e, OSError) and e.filename in (None, tmp):  # a failed write: name the file the user asked for
+            raise SasmiError(f"{path}: cannot write ({e.strerror or e}); nothing was written") from e
         raise
 
 
@@ -73,50 +83,139 @@ def write_mask(path: str | os.PathLike, mask: np.ndarray) -> None:
         Image.fromarray(mask.astype(np.uint8), mode="L").save(tmp, format="PNG")
 
 
-def _scale_integer(a: np.ndarray, path: Path) -> np.ndarray:
+def _scale(a: np.ndarray, path: Path) -> np.ndarray:
+    """Pixels of any integer or float type -> float32 in [0, 1]."""
+    if a.dtype.byteorder not in ("=", "|"):
+        a = a.astype(a.dtype.newbyteorder("="))
+    if a.dtype == np.bool_:
+        return a.astype(np.float32)
     if a.dtype == np.uint8:
         return a.astype(np.float32) / 255.0
     if a.dtype == np.uint16:
         return a.astype(np.float32) / 65535.0
-    if a.dtype in (np.int32, np.uint32) and a.max(initial=0) > 255:  # PIL's mode "I" for 16-bit PNG
-        return a.astype(np.float32) / 65535.0
-    if np.issubdtype(a.dtype, np.integer):
-        return a.astype(np.float32) / 255.0
+    if np.issubdtype(a.dtype, np.integer):  # PIL's mode "I" holds 16-bit PNGs as int32
+        scale = 65535.0 if a.max(initial=0) > 255 else 255.0
+        return np.clip(a.astype(np.float32) / scale, 0.0, 1.0)
     if np.issubdtype(a.dtype, np.floating):
+        if not np.isfinite(a).all():
+            raise SasmiError(f"{path}: holds NaN or infinite pixel values (allowed: finite values, read as [0, 1])")
         return np.clip(a.astype(np.float32), 0.0, 1.0)
-    raise SasmiError(f"{path}: unsupported pixel type {a.dtype}")
+    raise SasmiError(f"{path}: unsupported pixel type {a.dtype} (allowed: integers or floats)")
+
+
+def _check_file(path: Path) -> None:
+    """A regular file of bounded size, checked before a decoder opens it (/dev/zero, a FIFO, a folder)."""
+    try:
+        st = path.stat()
+    except OSError as e:
+        raise SasmiError(f"{path}: cannot read image ({e.strerror or e})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise SasmiError(f"{path}: not a regular file")
+    if st.st_size > IMAGE_MAX_BYTES:
+        raise SasmiError(f"{path}: {st.st_size} bytes is too large for an image (allowed: <= {IMAGE_MAX_BYTES})")
+
+
+def _check_pixels(path: Path, shape: tuple[int, ...]) -> None:
+    """Refuse an image whose decoded pixels would not fit, before decoding it (decompression bombs)."""
+    pixels = math.prod(shape)
+    if pixels > IMAGE_MAX_PIXELS:
+        raise SasmiError(f"{path}: {' x '.join(map(str, shape))} = {pixels} values is too large "
+                         f"(allowed: <= {IMAGE_MAX_PIXELS}, 8192² pixels; a decompression bomb or not a chip)")
+
+
+GRAY_MODES = ("L", "I", "F", "I;16", "I;16B", "I;16L", "I;16N")  # everything else is converted to "L"
+
+
+def _read_pil(path: Path) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Image.DecompressionBombWarning)  # PIL warns at 89M pixels: refuse
+        with Image.open(path) as im:
+            _check_pixels(path, im.size)
+            if im.mode not in GRAY_MODES:
+                im = im.convert("L")
+            return np.asarray(im)
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    a = np.load(path, mmap_mode="r", allow_pickle=False)  # mapped: the header's shape is checked, not trusted
+    _check_pixels(path, a.shape)
+    return np.array(a)
+
+
+def _read_tiff(path: Path) -> np.ndarray:
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        _check_pixels(path, page.shape)
+        return page.asarray()
 
 
 def read_gray(path: str | os.PathLike) -> np.ndarray:
     """Read PNG/JPEG/TIFF (8 or 16 bit) or NPY as an (H, W) float32 array in [0, 1].
 
     Colour images are converted to luminance. Raises SasmiError naming the file if it
-    cannot be read.
+    cannot be read: missing, not a regular file, too large, truncated, a decompression
+    bomb, an odd pixel type, NaN or infinite values.
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    _check_file(path)
     try:
         if suffix == ".npy":
-            a = np.load(path, allow_pickle=False)
+            a = _read_npy(path)
         elif suffix in (".tif", ".tiff"):
-            import tifffile
-
-            a = tifffile.imread(path)
+            a = _read_tiff(path)
         else:
-            with Image.open(path) as im:
-                if im.mode in ("RGB", "RGBA", "P", "LA", "CMYK", "YCbCr"):
-                    im = im.convert("L")
-                a = np.asarray(im)
-    except (OSError, ValueError, SyntaxError) as e:
-        raise SasmiError(f"{path}: cannot read image ({e})") from None
+            a = _read_pil(path)
+    except SasmiError:
+        raise
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as e:
+        raise SasmiError(f"{path}: too many pixels, a decompression bomb? ({first_line(e, 160)})") from None
+    except Exception as e:  # decoders raise many types for broken files (OSError, ValueError, struct.error, ...)
+        raise SasmiError(f"{path}: cannot read image ({type(e).__name__}: {first_line(e, 160)})") from None
     if a.ndim == 3:
         if a.shape[-1] in (3, 4):
             a = a[..., :3].mean(axis=-1).astype(a.dtype)
+        elif a.shape[-1] in (1, 2):  # gray, gray + alpha
+            a = a[..., 0]
         elif a.shape[0] == 1:
             a = a[0]
     if a.ndim != 2 or min(a.shape) == 0:
         raise SasmiError(f"{path}: expected a 2-D grayscale image, got shape {a.shape}")
-    return _scale_integer(a, path)
+    return _scale(a, path)
+
+
+def print_warning(message: str) -> None:
+    print(f"sasmi: warning: {message}", file=sys.stderr)
+
+
+def read_usable(paths: Sequence[Path], load: Callable[[Path], T] = read_gray, where: str | os.PathLike = "",
+                warn: Callable[[str], None] = print_warning) -> tuple[list[Path], list[T]]:
+    """(paths, loaded) of every path that `load` can read; each other one is skipped with one warning
+    line, then one line with the count. SasmiError only if nothing usable is left."""
+    kept, loaded, skipped = [], [], 0
+    for path in paths:
+        try:
+            loaded.append(load(path))
+            kept.append(path)
+        except SasmiError as e:
+            warn(f"skipped {one_line(e, 300)}")
+            skipped += 1
+    place = f" in {where}" if where else ""
+    if not kept:
+        raise SasmiError(f"{where or 'input'}: no usable image ({skipped} of {len(paths)} files skipped)")
+    if skipped:
+        warn(f"skipped {skipped} of {len(paths)} images{place}; using the other {len(kept)}")
+    return kept, loaded
+
+
+def read_folder(folder: str | os.PathLike, load: Callable[[Path], T] = read_gray) -> tuple[list[Path], list[T]]:
+    """read_usable over list_images(folder): the one way to read a folder of chips."""
+    paths = list_images(folder)
+    if not paths:
+        raise SasmiError(f"{folder}: no image files ({', '.join(IMAGE_SUFFIXES)}) in it")
+    return read_usable(paths, load, folder)
 
 
 def list_images(folder: str | os.PathLike) -> list[Path]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from sasmi import limits
 from sasmi.errors import SasmiError
 
 SHAPES = ("cylinder", "sphere", "cone", "mesh")
@@ -125,8 +127,8 @@ class Scene:
                 raise SasmiError(f"targets[{i}].y: {t.y:g} m lies outside the chip (allowed: -{half:g} < y < {half:g})")
             if t.shape == "mesh" and not t.mesh:
                 raise SasmiError(f"targets[{i}].mesh: a file path is required when shape = 'mesh'")
-            if t.shape == "mesh" and not Path(t.mesh).is_file():
-                raise SasmiError(f"targets[{i}].mesh: {t.mesh}: mesh file not found")
+            if t.shape == "mesh":
+                _check_mesh_file(Path(t.mesh), f"targets[{i}].mesh")
             height = target_height(t)
             if height is not None and t.burial >= height:
                 raise SasmiError(f"targets[{i}].burial: {t.burial:g} m buries the whole target "
@@ -134,6 +136,18 @@ class Scene:
             if t.shape == "cone" and t.radius_top > t.radius:
                 raise SasmiError(f"targets[{i}].radius_top: {t.radius_top:g} exceeds radius {t.radius:g}")
         return self
+
+
+def _check_mesh_file(path: Path, where: str) -> None:
+    """A mesh must be a regular file of bounded size: trimesh would read /dev/zero for ever."""
+    try:
+        st = path.stat()
+    except OSError:
+        raise SasmiError(f"{where}: {path}: mesh file not found") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise SasmiError(f"{where}: {path}: not a regular file (expected an OBJ, STL or PLY file)")
+    if st.st_size > limits.MESH_MAX_BYTES:
+        raise SasmiError(f"{where}: {path}: {st.st_size} bytes (allowed: <= {limits.MESH_MAX_BYTES} bytes)")
 
 
 def target_height(t: Target) -> float | None:
@@ -157,42 +171,68 @@ def _is_distribution(v: Any) -> bool:
     return isinstance(v, dict)
 
 
+def _section(where: str) -> str:
+    """"targets[3].yaw" -> "targets", "target_grid.target.yaw" -> "targets": the key of limits.FIELDS."""
+    head = where.split(".")[0].split("[")[0]
+    return "targets" if head == "targets" or where.startswith("target_grid.target") else head
+
+
 def _check_value(cls: type, name: str, value: Any, where: str) -> Any:
     f = {f.name: f for f in dataclasses.fields(cls)}[name]
     allowed = f.metadata.get("allowed") or ""
     expected = type(f.default)
     if expected is float and isinstance(value, int) and not isinstance(value, bool):
+        if abs(value) > 2**53:  # TOML integers are unbounded here; float() of a huge one overflows
+            raise SasmiError(f"{where}: {value} is far too large (allowed: {allowed or 'a finite number'})")
         value = float(value)
     if expected is int and isinstance(value, float) and value.is_integer():
         value = int(value)
     if type(value) is not expected:
-        raise SasmiError(f"{where}: expected {expected.__name__}, got {type(value).__name__} {value!r}")
+        raise SasmiError(f"{where}: expected {expected.__name__}, got {type(value).__name__} {value!r}"[:300])
+    if expected is str and len(value) > limits.MAX_STRING:
+        raise SasmiError(f"{where}: a string of {len(value)} characters (allowed: <= {limits.MAX_STRING})")
+    if expected is float and not math.isfinite(value):
+        raise SasmiError(f"{where}: {value!r} is not allowed (allowed: a finite number{', ' if allowed else ''}"
+                         f"{allowed})")
     check = f.metadata.get("check")
     if check is not None and not check(value):
         raise SasmiError(f"{where}: {value!r} is not allowed (allowed: {allowed})")
+    if expected in (int, float):
+        limits.field_range(_section(where), name).check(value, where)  # the stated bound and its reason
     return value
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 def _check_distribution(cls: type, name: str, dist: dict, where: str) -> None:
     if len(dist) != 1 or next(iter(dist)) not in ("uniform", "normal", "choice"):
         raise SasmiError(f"{where}: a distribution is one of {{uniform = [lo, hi]}}, {{normal = [mean, std]}}, "
-                         f"{{choice = [...]}}; got {dist!r}")
+                         f"{{choice = [...]}}; got {dist!r}"[:300])
     kind, args = next(iter(dist.items()))
     if not isinstance(args, list) or not args:
         raise SasmiError(f"{where}.{kind}: expected a non-empty list")
     if kind == "choice":
+        if len(args) > limits.MAX_CHOICES:
+            raise SasmiError(f"{where}.choice: {len(args)} entries (allowed: <= {limits.MAX_CHOICES})")
         for v in args:
             _check_value(cls, name, v, where)
         return
-    if len(args) != 2 or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in args):
-        raise SasmiError(f"{where}.{kind}: expected two numbers, got {args!r}")
+    if len(args) != 2 or not all(_is_number(a) for a in args):
+        raise SasmiError(f"{where}.{kind}: expected two numbers, got {args!r}"[:300])
+    if not all(math.isfinite(a) for a in args):
+        raise SasmiError(f"{where}.{kind}: {args!r} holds a value that is not a finite number")
     if kind == "uniform":
         if args[0] > args[1]:
             raise SasmiError(f"{where}.uniform: lower bound {args[0]} exceeds upper bound {args[1]}")
         for v in args:
             _check_value(cls, name, float(v) if isinstance(cls.__dataclass_fields__[name].default, float) else v, where)
-    elif args[1] < 0:
-        raise SasmiError(f"{where}.normal: std {args[1]} is negative")
+    else:
+        if args[1] < 0:
+            raise SasmiError(f"{where}.normal: std {args[1]} is negative")
+        _check_value(cls, name, args[0], f"{where}.normal mean")  # draws are checked again one by one
+        limits.field_range(_section(where), name).check(args[1], f"{where}.normal std")
 
 
 def _check_table(cls: type, table: Any, where: str, skip: tuple[str, ...] = ()) -> None:
@@ -249,12 +289,16 @@ class Preset:
         targets = raw.get("targets", [])
         if not isinstance(targets, list):
             raise SasmiError("targets: expected an array of tables ([[targets]])")
+        if len(targets) > limits.MAX_TARGETS:
+            raise SasmiError(f"targets: {len(targets)} targets (allowed: <= {limits.MAX_TARGETS})")
         for i, t in enumerate(targets):
             _check_table(Target, t, f"targets[{i}]")
+        if "description" in raw and not isinstance(raw["description"], str):
+            raise SasmiError(f"description: expected a string, got {type(raw['description']).__name__}")
         if "target_grid" in raw:
+            if not isinstance(raw["target_grid"], dict):
+                raise SasmiError(f"target_grid: expected a table, got {type(raw['target_grid']).__name__}")
             grid = dict(raw["target_grid"])
-            if not isinstance(grid, dict):
-                raise SasmiError("target_grid: expected a table")
             target = grid.pop("target", {})
             _check_table(TargetGrid, grid, "target_grid")
             _check_table(Target, target, "target_grid.target", skip=("x", "y"))
@@ -289,6 +333,11 @@ class Preset:
         count = int(math.floor(sonar.chip_size / grid.spacing))
         if count < 1:
             raise SasmiError(f"target_grid.spacing: {grid.spacing:g} m leaves no room on a {sonar.chip_size:g} m chip")
+        if first + count * count > limits.MAX_TARGETS:  # checked before any target is made: 1 mm is 10^9 of them
+            side = math.isqrt(max(limits.MAX_TARGETS - first, 0))
+            raise SasmiError(f"target_grid.spacing: {grid.spacing:g} m on a {sonar.chip_size:g} m chip makes "
+                             f"{count}² targets (allowed: <= {limits.MAX_TARGETS} targets in a scene, here a spacing "
+                             f">= {sonar.chip_size / max(side, 1):g} m)")
         centres = (np.arange(count) + 0.5) * grid.spacing - count * grid.spacing / 2
         targets = []
         for row, y in enumerate(centres):
@@ -301,19 +350,60 @@ class Preset:
         return targets
 
 
-def load_preset(path: str | Path) -> Preset:
-    """Read and validate a TOML preset; errors name the file or the field."""
-    path = Path(path)
+SCENES = Path(__file__).resolve().parent.parent / "scenes"  # the presets shipped beside the package
+
+
+def shipped_presets() -> list[str]:
+    return sorted(p.stem for p in SCENES.glob("*.toml"))
+
+
+def _find_preset(path: Path) -> Path:
+    """`path` itself, or a shipped preset by name ("cylinder_chip" -> scenes/cylinder_chip.toml)."""
+    if path.exists() or len(path.parts) != 1:
+        return path
+    shipped = SCENES / (path.name if path.suffix == ".toml" else path.name + ".toml")
+    if shipped.is_file():
+        return shipped
+    names = ", ".join(shipped_presets())
+    raise SasmiError(f"{path}: preset not found (a TOML file, or a shipped preset: {names})")
+
+
+def read_small_file(path: Path, max_bytes: int, what: str) -> bytes:
+    """The bytes of a regular file of at most `max_bytes`; checked before reading, so /dev/zero or a
+    FIFO is refused instead of read for ever."""
     try:
-        text = path.read_text()
+        st = path.stat()
     except FileNotFoundError:
-        raise SasmiError(f"{path}: preset not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SasmiError(f"{path}: cannot read preset ({e})") from None
+        raise SasmiError(f"{path}: {what} not found") from None
+    except OSError as e:
+        raise SasmiError(f"{path}: cannot read {what} ({e.strerror or e})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise SasmiError(f"{path}: {kind} (expected a {what} file)")
+    if st.st_size > max_bytes:
+        raise SasmiError(f"{path}: {st.st_size} bytes is too large for a {what} (allowed: <= {max_bytes} bytes)")
     try:
-        raw = tomllib.loads(text)
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)
+    except OSError as e:
+        raise SasmiError(f"{path}: cannot read {what} ({e.strerror or e})") from None
+    if len(data) > max_bytes:  # grew since stat
+        raise SasmiError(f"{path}: too large for a {what} (allowed: <= {max_bytes} bytes)")
+    return data
+
+
+def load_preset(path: str | Path) -> Preset:
+    """Read and validate a TOML preset (a path, or the name of a shipped one); errors name the file or field."""
+    path = _find_preset(Path(path))
+    data = read_small_file(path, limits.PRESET_MAX_BYTES, "preset")
+    try:
+        raw = tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise SasmiError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
     except tomllib.TOMLDecodeError as e:
         raise SasmiError(f"{path}: not valid TOML ({e})") from None
+    except RecursionError:
+        raise SasmiError(f"{path}: not valid TOML (nested too deeply)") from None
     return Preset.from_dict(raw, path=path)
 
 

@@ -91,10 +91,10 @@ def test_target_grid_covers_the_field():
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--size", "40"], "--size 40: must be a positive multiple of 16"),
-    (["--size", "0"], "--size 0: must be a positive multiple of 16"),
-    (["--count", "0"], "--count: 0 is not allowed"),
-    (["--spp", "-1"], "--spp: -1 is not allowed"),
+    (["--size", "40"], "argument --size: 40 is not a multiple of 16"),
+    (["--size", "0"], "argument --size: 0 is out of range (allowed: a multiple of 16, 16 to 4096"),
+    (["--count", "0"], "argument --count: 0 is out of range"),
+    (["--spp", "-1"], "argument --spp: -1 is out of range"),
 ])
 def test_cli_bad_flags_exit_2_and_write_nothing(tmp_path, capsys, args, message):
     out = tmp_path / "out"

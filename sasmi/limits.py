@@ -1,0 +1,157 @@
+"""The stated ranges of every number a user can give, each with the reason for its bound.
+
+One table for command-line flags (FLAGS, keyed by the flag's name, which has one meaning
+in every command) and one for preset fields (FIELDS, keyed by "section.field"); the
+argparse types in sasmi/cli_types.py and the preset checks in sasmi/scene.py read them.
+Lower bounds that are part of a preset field's meaning (> 0, in [0, 1]) stay beside the
+field in scene.py; this module adds the finite upper bounds and why they are where they are.
+
+Measured on the 2-core dev machine (scenes/cylinder_chip.toml; probe in docs/errors.md):
+a render costs ~0.5 kB of memory per pixel (1024 px: +0.5 GB for seafloor mesh, BVH and
+film), whatever the spp, and ~5e6 samples (pixels x spp) per second.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from sasmi.errors import SasmiError
+
+
+def _number(v: float | None) -> str:
+    """4294967295 stays whole, 1e-12 stays short."""
+    if v is not None and float(v).is_integer() and abs(v) < 1e12:
+        return str(int(v))
+    return f"{v:g}" if v is not None else ""
+
+
+@dataclass(frozen=True)
+class Range:
+    """lo <= value <= hi (ends optional); `kind` int or float; `why` explains the bound."""
+    lo: float | None
+    hi: float | None
+    why: str
+    kind: type = float
+    multiple: int = 1  # ints only: value % multiple == 0
+
+    def allowed(self) -> str:
+        parts = []
+        if self.kind is int and self.multiple > 1:
+            parts.append(f"a multiple of {self.multiple}")
+        lo, hi = _number(self.lo), _number(self.hi)
+        if self.lo is not None and self.hi is not None:
+            parts.append(f"{lo} to {hi}")
+        elif self.lo is not None:
+            parts.append(f">= {lo}")
+        elif self.hi is not None:
+            parts.append(f"<= {hi}")
+        text = ", ".join(parts) or "any finite number"
+        return f"{text}; {self.why}" if self.why else text
+
+    def problem(self, value: float) -> str | None:
+        """None if `value` is allowed, else why not (without the name)."""
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"{value!r} is not a finite number"
+        if self.lo is not None and value < self.lo or self.hi is not None and value > self.hi:
+            return f"{value!r} is out of range"
+        if self.kind is int and value % self.multiple:
+            return f"{value!r} is not a multiple of {self.multiple}"
+        return None
+
+    def check(self, value: float, name: str) -> float:
+        problem = self.problem(value)
+        if problem:
+            raise SasmiError(f"{name}: {problem} (allowed: {self.allowed()})")
+        return value
+
+
+# ---------------------------------------------------------------- sizes of things read whole
+
+PRESET_MAX_BYTES = 1 << 20  # presets are a few kB; a cap stops /dev/zero or a stray data file being read whole
+MESH_MAX_BYTES = 256 << 20  # trimesh holds a mesh several times over in memory
+IMAGE_MAX_BYTES = 1 << 30  # one image file; anything larger is not a chip
+IMAGE_MAX_PIXELS = 8192 * 8192  # decoded pixels of one image: 256 MB as float32 (chips are 128-1024 px)
+MAX_TARGETS = 1024  # targets in one scene: each is a ~130-triangle mesh built per scene (144 take 3 ms)
+
+# ---------------------------------------------------------------- command-line flags
+
+MAX_SIZE = 4096
+MAX_SAMPLES = 1 << 30  # size² x spp of one chip: ~4 min at ~5e6 samples/s; more is a typo, not a plan
+SIZE_WHY = ("networks halve the image four times; a render costs ~0.5 kB per pixel "
+            f"(~8 GB at {MAX_SIZE})")
+
+FLAGS: dict[str, Range] = {
+    "--seed": Range(0, 2**32 - 1, "numpy, torch and Dr.Jit all take seeds in [0, 2^32)", int),
+    "--index": Range(0, 2**31 - 1, "scene numbers are non-negative", int),
+    "--count": Range(1, 100_000, "every scene is drawn and checked before the first chip is written "
+                                 "(up to 3 ms each) and each chip is 3 files in one folder; split larger sets "
+                                 "by --seed", int),
+    "--size": Range(16, MAX_SIZE, SIZE_WHY, int, multiple=16),
+    "--spp": Range(1, 4096, "render time grows linearly with samples per pixel", int),
+    "--workers": Range(1, 64, "each worker process holds its own Dr.Jit kernel and scene; "
+                              "more processes than cores only wait", int),
+    "--batch": Range(1, 1024, "one pass holds batch x size² activations per layer", int),
+    "--steps": Range(1, 10_000_000, "training and fitting steps; 10^7 is weeks of GPU time", int),
+    "--lr": Range(1e-12, 1.0, "Adam learning rates above 1 diverge at once; 0 learns nothing"),
+    "--betas": Range(0.0, 0.999999, "Adam's moment decays lie in [0, 1)"),
+    "--n-critic": Range(1, 100, "critic updates per generator update; WGAN-GP uses 5", int),
+    "--phi-weight": Range(0.0, 1e6, "weight of the φ loss; the default is 100"),
+    "--phi-margin": Range(0.0, 10.0, "free relative φ change; 10 means φ is not constrained at all"),
+    "--bootstrap": Range(2, 100_000, "a ± needs 2 resamples; each resample recomputes one FID", int),
+    "--scenes": Range(1, 256, "scenes rendered per fit step; time grows linearly", int),
+    "--columns": Range(1, 256, "tiles per row of a contact sheet", int),
+    "--limit": Range(1, 10_000, "tiles in one contact sheet, all held in memory", int),
+}
+
+
+def check_render_cost(size: int, spp: int, flags: str = "--size and --spp") -> None:
+    """size² x spp within MAX_SAMPLES: render time grows with the product, not with each alone."""
+    if size * size * spp > MAX_SAMPLES:
+        raise SasmiError(f"{flags}: {size}² x {spp} = {size * size * spp:.3g} samples per chip (allowed: "
+                         f"<= {MAX_SAMPLES:.3g}, ~4 min per chip at ~5e6 samples/s; lower --spp or --size)")
+
+
+# ---------------------------------------------------------------- preset fields
+
+ANGLE = Range(-360.0, 360.0, "degrees; one turn either way reaches every direction")
+METRES = 1000.0  # no length in a chip scene needs more than a kilometre
+GENERIC = Range(-1e6, 1e6, "no preset quantity needs more; larger values overflow the float32 geometry")
+RELATIVE_LEVEL = Range(None, 1e3, "relative to the calibrated exposure; beyond 10^3 every pixel saturates")
+
+FIELDS: dict[str, Range] = {
+    "sonar.max_range": Range(None, 2000.0, "m; SAS ranges reach a few hundred metres, and the float32 ray "
+                                           "tracer works in chip units"),
+    "sonar.near_range": Range(None, 2000.0, "m; as max_range"),
+    "sonar.chip_size": Range(0.1, 500.0, "m; below 0.1 m the chip-unit scale overflows the geometry, "
+                                         "above 500 m a pixel is coarser than any target"),
+    "sonar.track_length": Range(None, 5000.0, "m of synthetic aperture"),
+    "sonar.emitters": Range(None, 1024, "render time grows linearly with emitters (one spot light each)", int),
+    "sonar.intensity": RELATIVE_LEVEL,
+    "seafloor.rms_height": Range(None, 10.0, "m; the array flies at max_range / 10"),
+    "seafloor.correlation_length": Range(1e-3, METRES, "m"),
+    "seafloor.spectral_exponent": Range(None, 20.0, "steeper spectra are indistinguishable from smooth"),
+    "seafloor.ripple_amplitude": Range(None, 10.0, "m"),
+    "seafloor.ripple_wavelength": Range(1e-3, METRES, "m"),
+    "seafloor.ripple_direction": ANGLE,
+    "seafloor.rocks": Range(None, 1000, "each rock is one pass over the (size+1)² heightfield "
+                                        "(~0.4 ms at 256 px)", int),
+    "seafloor.rock_radius": Range(None, 100.0, "m"),
+    "targets.yaw": ANGLE,
+    "targets.burial": Range(None, 100.0, "m"),
+    "targets.length": Range(None, 100.0, "m; longer than any chip's target"),
+    "targets.radius": Range(None, 100.0, "m"),
+    "targets.radius_top": Range(None, 100.0, "m"),
+    "targets.scale": Range(None, 1000.0, "a mesh file's units to metres (mm -> m is 0.001)"),
+    "post.gain": RELATIVE_LEVEL,
+    "post.speckle_looks": Range(None, 1000.0, "gamma speckle with more looks is indistinguishable from none"),
+    "post.noise_std": Range(None, 10.0, "gray levels; images are in [0, 1]"),
+    "target_grid.spacing": Range(0.01, METRES, "m; the target count is bounded separately"),
+    "target_grid.jitter": Range(None, 100.0, "m"),
+}
+MAX_STRING = 4096  # characters in a preset string (a mesh path, a description)
+MAX_CHOICES = 10_000  # entries of one {choice = [...]}
+
+
+def field_range(section: str, name: str) -> Range:
+    """The range of preset field `section.name` ("targets" for every target); GENERIC if not listed."""
+    return FIELDS.get(f"{section}.{name}", GENERIC)
