@@ -88,8 +88,9 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
         raise SasmiError(f"{in_dir}: no readable image in it")
 
     # carry the labels of a render set over
-    if render_set and (in_dir / "masks").is_dir():
-        shutil.copytree(in_dir / "masks", out_dir / "masks", dirs_exist_ok=True)
+    for masks in ("masks", "instances", "shadows"):  # class, instance and shadow-instance masks
+        if render_set and (in_dir / masks).is_dir():
+            shutil.copytree(in_dir / masks, out_dir / masks, dirs_exist_ok=True)
     if render_set and (in_dir / "labels.jsonl").is_file():
         with atomic_path(out_dir / "labels.jsonl") as tmp:
             shutil.copyfile(in_dir / "labels.jsonl", tmp)

@@ -14,13 +14,13 @@ import sys
 import warnings
 
 from sasmi.cli_types import apply_limits
-from sasmi.commands import (atr_cmd, crosscheck_cmd, evaluate_cmd, fit_cmd, generate_cmd, render_cmd, split_cmd,
-                            stats_cmd, train_cmd, translate_cmd)
+from sasmi.commands import (atr_cmd, crosscheck_cmd, evaluate_cmd, fit_cmd, generate_cmd, pipeline_cmd, render_cmd,
+                            split_cmd, stats_cmd, train_cmd, translate_cmd)
 from sasmi.errors import first_line, one_line, user_error_message
 from sasmi.limits import check_render_cost
 
-COMMANDS = (render_cmd, train_cmd, translate_cmd, generate_cmd, evaluate_cmd, crosscheck_cmd, fit_cmd, split_cmd,
-            stats_cmd, atr_cmd)
+COMMANDS = (render_cmd, split_cmd, stats_cmd, train_cmd, translate_cmd, generate_cmd, pipeline_cmd, evaluate_cmd,
+            crosscheck_cmd, fit_cmd, atr_cmd)
 
 DEBUG = "SASMI_DEBUG"  # set to 1 to see the traceback of any error
 

@@ -26,7 +26,9 @@ from tqdm import tqdm
 
 from sasmi import __version__
 from sasmi.errors import SasmiError
-from sasmi.images import FORMATS, write_gray, write_mask, write_text
+from sasmi.images import FORMATS, write_gray, write_text
+from sasmi.labels import categories_of, read_labels
+from sasmi.masks import write_class_mask, write_instance_mask
 from sasmi.preprocess import check_size
 from sasmi.scene import Preset
 
@@ -79,7 +81,9 @@ def is_complete(out: Path, index: int, image_format: str) -> bool:
 def write_one(out: Path, index: int, image: np.ndarray, rendered: Rendered, image_format: str) -> None:
     """Write one chip (image (H, W) in [0, 1]); its labels file goes last and marks the chip complete."""
     write_gray(image_path(out, index, image_format), image)
-    write_mask(out / "masks" / f"{_name(index)}.png", rendered.mask)
+    write_class_mask(out / "masks" / f"{_name(index)}.png", rendered.mask)
+    write_instance_mask(out / "instances" / f"{_name(index)}.png", rendered.instances)
+    write_instance_mask(out / "shadows" / f"{_name(index)}.png", rendered.shadows)
     label = replace(rendered.label, index=index, image=f"images/{image_path(out, index, image_format).name}",
                     mask=f"masks/{_name(index)}.png")
     write_text(out / "labels" / f"{_name(index)}.json", label.dumps())
@@ -170,4 +174,9 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
 def assemble_labels(out: Path, count: int) -> None:
     lines = [(out / "labels" / f"{_name(i)}.json").read_text().strip() for i in range(count)]
     write_text(out / "labels.jsonl", "\n".join(lines) + "\n")
+    # class ids for ATR tools (id = position + 1), known only once every chip is drawn
+    run_json = out / "run.json"
+    record = json.loads(run_json.read_text())
+    record["categories"] = categories_of(read_labels(out))
+    write_text(run_json, json.dumps(record, indent=2))
 

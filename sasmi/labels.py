@@ -21,7 +21,7 @@ from sasmi.errors import SasmiError
 Box = tuple[float, float, float, float]
 
 # keys of a target record that the render measured; every other key is a sampled parameter
-_MEASURED = ("pixel_centre", "bbox", "shadow_bbox", "visible_pixels", "shadow_pixels")
+_MEASURED = ("pixel_centre", "bbox", "shadow_bbox", "visible_pixels", "shadow_pixels", "geometry")
 
 
 def _box(value: Any) -> Box | None:
@@ -48,6 +48,9 @@ class TargetLabel:
     shadow_bbox: Box | None  # its acoustic shadow; None when it casts none on the chip
     visible_pixels: int = 0
     shadow_pixels: int = 0
+    # altitude, ground_range, slant_range (m), grazing_angle (deg), along_track (m), heading (deg = yaw):
+    # what ATR papers stratify by
+    geometry: dict = field(default_factory=dict)
 
     @property
     def shape(self) -> str:
@@ -74,14 +77,16 @@ class TargetLabel:
                 "bbox": None if self.bbox is None else [int(v) if float(v).is_integer() else v for v in self.bbox],
                 "shadow_bbox": None if self.shadow_bbox is None
                 else [int(v) if float(v).is_integer() else v for v in self.shadow_bbox],
-                "visible_pixels": self.visible_pixels, "shadow_pixels": self.shadow_pixels}
+                "visible_pixels": self.visible_pixels, "shadow_pixels": self.shadow_pixels,
+                **({"geometry": self.geometry} if self.geometry else {})}
 
     @classmethod
     def from_json(cls, d: dict) -> "TargetLabel":
         return cls(params={k: v for k, v in d.items() if k not in _MEASURED},
                    pixel_centre=tuple(float(v) for v in d["pixel_centre"]),
                    bbox=_box(d.get("bbox")), shadow_bbox=_box(d.get("shadow_bbox")),
-                   visible_pixels=int(d.get("visible_pixels", 0)), shadow_pixels=int(d.get("shadow_pixels", 0)))
+                   visible_pixels=int(d.get("visible_pixels", 0)), shadow_pixels=int(d.get("shadow_pixels", 0)),
+                   geometry=dict(d.get("geometry") or {}))
 
 
 @dataclass(frozen=True)

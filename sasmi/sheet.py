@@ -7,7 +7,8 @@ import numpy as np
 from PIL import Image
 
 from sasmi.errors import SasmiError
-from sasmi.images import atomic_path, list_images, read_gray, to_uint8
+from sasmi.images import atomic_path, list_images, read_gray, read_usable, to_uint8
+from sasmi.masks import read_mask
 
 TARGET_RGB, SHADOW_RGB = np.array([255, 60, 60]), np.array([70, 110, 255])
 
@@ -51,14 +52,11 @@ def contact_sheet(folder: str | Path, out: str | Path | None = None, columns: in
     paths = list_images(folder)[:limit]
     if not paths:
         raise SasmiError(f"{folder}: no images to show")
+    paths, images = read_usable(paths, read_gray, folder)  # an unreadable chip is skipped with a warning
     tiles = []
-    for p in paths:
+    for p, image in zip(paths, images):
         mask_path = folder / "masks" / (p.stem + ".png")
-        mask = None
-        if mask_path.is_file():
-            with Image.open(mask_path) as m:
-                mask = np.asarray(m)
-        tiles.append(tile(read_gray(p), mask))
+        tiles.append(tile(image, read_mask(mask_path) if mask_path.is_file() else None))
     h, w = max(t.shape[0] for t in tiles), max(t.shape[1] for t in tiles)
     rows = -(-len(tiles) // columns)
     pad = 4

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from gan import train
+from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from gan.kinds.sasgan import SASGAN, SasganRun
+from gan.loop import train
 from gan.autoencoder import AutoencoderConfig, load_encoder
 from sasmi import cli
 from sasmi.eval import features, phi_fid, preservation, sweeps
@@ -19,7 +21,7 @@ from sasmi.labels import TargetLabel
 from sasmi.scene import Scene, Sonar, Target
 
 CPU = torch.device("cpu")
-TINY_AE = train.AutoencoderRun(steps=3, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
+TINY_AE = AutoencoderRun(steps=3, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
                                log_every=1, sample_every=10, checkpoint_every=10)
 SIZE = 48  # written at 48 px, read at the encoder's 32: the resize path is exercised too
 
@@ -67,7 +69,7 @@ def data(tmp_path_factory):
         shifted=write_set(root / "shifted", 12, seed=2, labelled=True, shift=5),
         floor=write_set(root / "floor", 12, seed=3, target=False),
     )
-    d.phi = train.train_autoencoder(TINY_AE, root / "ae", d.real, CPU)
+    d.phi = train(AUTOENCODER, TINY_AE, root / "ae", {"real": d.real}, CPU).out
     return d
 
 
@@ -246,9 +248,9 @@ def test_pose_sweep_through_mitsuba_and_a_trained_generator(data, tmp_path):
     from gan.critic import CriticConfig
     from gan.generator import GeneratorConfig
 
-    cfg = train.SasganRun(steps=1, size=32, batch=2, n_critic=1, generator=GeneratorConfig(4, 1),
+    cfg = SasganRun(steps=1, size=32, batch=2, n_critic=1, generator=GeneratorConfig(4, 1),
                           critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)
-    generator = train.train_sasgan(cfg, tmp_path / "gan", data.real, data.renders, data.phi, CPU)
+    generator = train(SASGAN, cfg, tmp_path / "gan", {"real": data.real, "renders": data.renders, "phi": data.phi}, CPU).out
     preset = Path(__file__).resolve().parents[1] / "scenes" / "cylinder_chip.toml"
     report = sweeps.pose_sweep_from_runs(preset, generator, tmp_path, sweeps.SweepConfig(steps=3, spp=4))
     sweep = report.metrics["pose_sweep"]

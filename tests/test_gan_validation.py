@@ -71,8 +71,9 @@ def test_bad_training_flags_are_one_line_naming_the_flag(tmp_path, capsys, runs,
     out = tmp_path / "run"
     argv = ["train", "sasgan", "--real", str(runs["images"]), "--renders", str(runs["images"]),
             "--phi", str(runs["ae"]), "--out", str(out), *TINY, *flags]
-    err = _one_line_error(capsys, argv, named)
-    assert "must be" in err or "expected" in err  # says what is allowed
+    flag, _, value = named.partition(" ")
+    err = _one_line_error(capsys, argv, flag, value)
+    assert any(word in err for word in ("must be", "expected", "allowed"))  # says what is allowed
     assert not out.exists()
 
 

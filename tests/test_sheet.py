@@ -33,5 +33,5 @@ def test_default_sheet_goes_beside_the_folder(renders, capsys):
 def test_zero_is_a_one_line_error(renders, capsys, flag):
     assert cli.main(["sheet", str(renders), flag, "0"]) == 2
     err = capsys.readouterr().err
-    assert err == f"sasmi sheet: error: {flag} 0: must be at least 1\n"
+    assert err.startswith("sasmi sheet: error: ") and err.count("\n") == 1 and flag in err and "allowed: 1" in err
     assert not (renders.parent / "renders_sheet.png").exists()

@@ -3,6 +3,7 @@ preservation and pose sweeps of image sets against a real set, as report.md + me
 from __future__ import annotations
 
 import argparse
+import functools
 import re
 import sys
 from pathlib import Path
@@ -69,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise SasmiError(f"--bootstrap {args.bootstrap}: needs at least 2 resamples for a ±")
     cfg = EvalConfig(bootstrap=args.bootstrap, seed=args.seed)
 
-    from gan.train import resolve_device
+    from sasmi.commands.common import resolve_device
 
     device = resolve_device(args.device)
     encoder = as_encoder(args.phi, device)
@@ -81,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items() if v is not None)),))
     cache_dir = None if args.no_cache else args.cache or default_cache_dir()
     report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log, cache_dir,
-                               statistics=None)  # the lead's hook: sasmi.stats.chip_statistics once merged
+                               statistics=functools.partial(median_statistics, size=encoder.image_size))
     if args.preset is None:
         report += sweeps.skipped_pose_sweep("no --preset and --generator given")
     else:
@@ -94,3 +95,10 @@ def run(args: argparse.Namespace) -> int:
     log(f"wrote {path}")
     print(path)
     return 0
+
+
+def median_statistics(folder, size: int) -> dict[str, float]:
+    """`sasmi stats`'s medians of one folder: the image-statistics row of the report."""
+    from sasmi.stats import chip_statistics
+
+    return {name: s["median"] for name, s in chip_statistics(folder, size=size)["summary"].items()}

@@ -23,6 +23,7 @@ from sasmi.eval.config import PreservationConfig
 from sasmi.eval.report import MASK_SEAFLOOR, MASK_SHADOW, MASK_TARGET, Report, Section, examples_figure, \
     preservation_markdown
 from sasmi.images import list_images, read_gray
+from sasmi.masks import read_mask
 from sasmi.labels import Box, TargetLabel, has_labels, labels_by_index
 
 
@@ -119,8 +120,7 @@ def load_labelled(folder: str | os.PathLike) -> list[tuple[Path, np.ndarray, np.
         if not (path.stem.isdigit() and int(path.stem) in labels and mask_path.is_file()):
             continue
         image = read_gray(path)
-        with Image.open(mask_path) as m:
-            mask_image = m.convert("L") if m.mode != "L" else m.copy()
+        mask_image = Image.fromarray(read_mask(mask_path))  # ids, never palette colours
         targets = labels[int(path.stem)].targets
         if mask_image.size != (image.shape[1], image.shape[0]):
             scale = image.shape[1] / mask_image.size[0]

@@ -20,9 +20,9 @@ from sasmi.eval.config import EvalConfig, PreservationConfig
 from sasmi.eval.features import FeatureSet
 from sasmi.images import atomic_path, write_text
 from sasmi.labels import TargetLabel
+from sasmi.masks import SEAFLOOR as MASK_SEAFLOOR, SHADOW as MASK_SHADOW, TARGET as MASK_TARGET
 
 REAL_VS_REAL = "real→real"
-MASK_SEAFLOOR, MASK_TARGET, MASK_SHADOW = 0, 1, 2  # as written by sasmi.mitsuba_render
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sasmi.labels import ChipLabel, TargetLabel
+from sasmi.labels import ChipLabel, TargetLabel, target_geometry
+from sasmi.masks import SEAFLOOR as MASK_SEAFLOOR, SHADOW as MASK_SHADOW, TARGET as MASK_TARGET
 from sasmi.scene import Scene, scene_to_dict
-
-MASK_SEAFLOOR, MASK_TARGET, MASK_SHADOW = 0, 1, 2
 
 
 def class_mask(visible: np.ndarray, owner: np.ndarray) -> np.ndarray:
@@ -30,14 +29,15 @@ def _bbox(pixels: np.ndarray) -> tuple[int, int, int, int] | None:
 
 
 def chip_label(scene: Scene, visible: np.ndarray, owner: np.ndarray, size: int, index: int = 0) -> ChipLabel:
-    """The scene's sampled parameters plus, per target, its pixel centre and boxes (col0, row0, col1, row1)."""
+    """The scene's sampled parameters plus, per target, its pixel centre, boxes (col0, row0, col1, row1) and geometry."""
     chip = scene.sonar.chip_size
     params = scene_to_dict(scene)
     targets = tuple(
         TargetLabel(params=t,
                     pixel_centre=((t["x"] + chip / 2) / chip * size - 0.5, (t["y"] + chip / 2) / chip * size - 0.5),
                     bbox=_bbox(visible == k), shadow_bbox=_bbox(owner == k),
-                    visible_pixels=int((visible == k).sum()), shadow_pixels=int((owner == k).sum()))
+                    visible_pixels=int((visible == k).sum()), shadow_pixels=int((owner == k).sum()),
+                    geometry={**target_geometry(params["sonar"], t["x"], t["y"]), "heading": t["yaw"]})
         for k, t in enumerate(params.pop("targets")))
     return ChipLabel(index=index, size=size, scene=params, targets=targets)
 

@@ -21,6 +21,7 @@ import numpy as np
 from sasmi.errors import SasmiError
 from sasmi.labels import ChipLabel
 from sasmi.preprocess import check_size
+from sasmi.masks import instance_ids
 from sasmi.render.annotate import chip_label, class_mask, labels_dict
 from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
@@ -34,6 +35,8 @@ class Rendered:
     image: np.ndarray  # (H, W) float32 in [0, 1]
     mask: np.ndarray  # (H, W) uint8: 0 seafloor, 1 target, 2 acoustic shadow
     label: ChipLabel  # index 0 and no paths: the render set's writer fills those in
+    instances: np.ndarray  # (H, W) uint8: 0 none, k + 1 where target k is seen
+    shadows: np.ndarray  # (H, W) uint8: 0 none, k + 1 where target k casts its shadow
 
     @property
     def labels(self) -> dict:
@@ -149,7 +152,8 @@ class Renderer:
         image = postprocess(self.collect(launched), maps)
         visible, owner = self.visibility(g)
         return Rendered(image=image, mask=class_mask(visible, owner),
-                        label=chip_label(scene, visible, owner, self.size))
+                        label=chip_label(scene, visible, owner, self.size),
+                        instances=instance_ids(visible), shadows=instance_ids(owner))
 
 
 @lru_cache(maxsize=4)

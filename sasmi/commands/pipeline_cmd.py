@@ -1,0 +1,45 @@
+"""`sasmi fit --real DIR --out RUN`: real chips -> φ, renders, SAS GAN, translations, realism report."""
+from __future__ import annotations
+
+import argparse
+
+from sasmi.commands.common import add_device, add_threads, apply_threads, resolve_device
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("fit", help="one command from real chips to a trained SAS GAN and its realism report",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                       description="Trains φ into RUN/phi, renders the preset into RUN/renders, trains the SAS GAN "
+                                   "into RUN/sasgan within the time budget, translates into RUN/translated and "
+                                   "writes RUN/report/ (sasmi evaluate's metrics.json). Rerun to resume; raise "
+                                   "--minutes to train on.")
+    p.add_argument("--real", required=True, metavar="DIR", help="real target chips the SAS GAN learns from")
+    p.add_argument("--out", required=True, metavar="RUN", help="run folder")
+    p.add_argument("--phi-real", metavar="DIR", help="chips φ learns from (default: --real); targets and seafloor")
+    p.add_argument("--validation", metavar="DIR",
+                   help="real chips the report compares with (default: --real, which flatters); see `sasmi split`")
+    p.add_argument("--minutes", type=float, default=60.0, help="time budget of the whole run")
+    p.add_argument("--size", type=int, default=128, help="image size, a multiple of 16")
+    p.add_argument("--preset", default="cylinder_chip", help="scene preset: a TOML file or a shipped preset's name")
+    p.add_argument("--renders", type=int, default=400, help="chips rendered for the GAN and the report")
+    p.add_argument("--seed", type=int, default=0)
+    add_device(p)
+    add_threads(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sasmi.errors import SasmiError
+    from sasmi.pipeline import FitPlan, fit, with_defaults
+
+    if not 0 < args.minutes <= 7 * 24 * 60:  # a fraction of a minute is a smoke test: every stage still runs
+        raise SasmiError(f"--minutes {args.minutes}: must be in (0, 10080]")
+    if not 8 <= args.renders <= 1_000_000:
+        raise SasmiError(f"--renders {args.renders}: must be in [8, 1000000]")
+    apply_threads(args.threads)
+    plan = with_defaults(FitPlan(real=args.real, out=args.out, phi_real=args.phi_real, validation=args.validation,
+                                 minutes=args.minutes, size=args.size, preset=args.preset, renders=args.renders,
+                                 seed=args.seed))
+    path = fit(plan, resolve_device(args.device))
+    print(path)
+    return 0

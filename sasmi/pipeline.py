@@ -1,0 +1,203 @@
+"""`sasmi fit`: from real chips to a realism report in one resumable command, within a time budget.
+
+Stages, each into its own folder of RUN (ordinary folders the other commands accept):
+    phi         the φ autoencoder on the φ chips                 (sasmi train autoencoder)
+    renders     the preset rendered at the training size        (sasmi render)
+    sasgan      the SAS GAN, trained until its share of time ends (sasmi train sasgan)
+    translated  the renders through the generator                (sasmi translate)
+    report      φ-FID/KID/P-R, statistics, target preservation   (sasmi evaluate)
+
+RUN/fit.json records the plan, the seconds each stage has used and which stages are
+done; rerunning the same command continues where a killed run stopped (the training
+stages resume from their last checkpoint) and a larger --minutes trains on.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+from sasmi.errors import SasmiError
+from sasmi.images import list_images, write_text
+
+STAGES = ("phi", "renders", "sasgan", "translated", "report")
+# shares of --minutes for the two trainings; rendering, translating and the report take what they take
+SHARE = {"phi": 0.2, "sasgan": 0.7}
+FIRST_CHUNK = 20  # steps trained before the speed is known
+
+
+@dataclass(frozen=True)
+class FitPlan:
+    real: str  # real target chips the SAS GAN learns from
+    out: str
+    phi_real: str  # chips φ learns from (targets and seafloor: φ must know both)
+    validation: str  # real chips the report compares with; never seen by φ or the GAN when they differ
+    minutes: float = 60.0
+    size: int = 128
+    preset: str = "cylinder_chip"
+    renders: int = 400  # the GAN's render set, and the set the report translates
+    seed: int = 0
+
+    def identity(self) -> dict:
+        """What a rerun must share with the run it continues (the budget may grow)."""
+        d = asdict(self)
+        d.pop("minutes")
+        return d
+
+
+def _log(stage: str, message: str, plan: FitPlan, used: float) -> None:
+    left = max(plan.minutes * 60 - used, 0) / 60
+    print(f"sasmi fit: [{STAGES.index(stage) + 1}/{len(STAGES)} {stage}] {message} ({left:.0f} min of the budget left)",
+          file=sys.stderr, flush=True)
+
+
+class State:
+    """RUN/fit.json: the plan, seconds used per stage, stages done; rewritten atomically after each change."""
+
+    def __init__(self, plan: FitPlan):
+        self.path = Path(plan.out) / "fit.json"
+        self.plan = plan
+        self.seconds: dict[str, float] = {}
+        self.done: list[str] = []
+        if self.path.is_file():
+            try:
+                saved = json.loads(self.path.read_text())
+            except (OSError, json.JSONDecodeError) as e:
+                raise SasmiError(f"{self.path}: unreadable ({e}); choose another --out") from None
+            if saved.get("plan") != plan.identity():
+                raise SasmiError(f"{plan.out}: holds a `sasmi fit` run with other settings; choose another --out "
+                                 f"(only --minutes may change)")
+            self.seconds, self.done = saved.get("seconds", {}), saved.get("done", [])
+        elif Path(plan.out).exists() and any(Path(plan.out).iterdir()):
+            raise SasmiError(f"--out {plan.out}: exists and is not a `sasmi fit` run; choose another --out")
+
+    @property
+    def used(self) -> float:
+        return sum(self.seconds.values())
+
+    def add(self, stage: str, seconds: float, done: bool = False) -> None:
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + seconds
+        if done and stage not in self.done:
+            self.done.append(stage)
+        write_text(self.path, json.dumps({"plan": self.plan.identity(), "minutes": self.plan.minutes,
+                                          "seconds": self.seconds, "done": self.done}, indent=2) + "\n")
+
+
+def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: float, stage: str,
+              state: State) -> int:
+    """Train `kind` in chunks until `seconds` more have passed; returns the step reached.
+
+    Each chunk is an ordinary resumed run (resume is exact), so a kill loses at most one chunk.
+    """
+    from gan.loop import resolve_config, train
+
+    deadline = time.monotonic() + seconds
+    last = out / "checkpoints" / "last.pt"
+    step, chunk, per_step = 0, FIRST_CHUNK, None
+    while True:
+        left = deadline - time.monotonic()
+        if per_step is not None:
+            if left < 2 * per_step:
+                break
+            chunk = max(1, min(int(left * 0.95 / per_step), 500))  # a progress line at least every 500 steps
+        resume = last.is_file()
+        if resume:
+            from gan.run import read_run
+
+            step = read_run(out, kind.name).step
+        cfg = resolve_config(kind, out, {"steps": step + chunk} if resume else {**overrides, "steps": chunk}, resume)
+        started = time.monotonic()
+        done = train(kind, cfg, out, inputs, device, resume)
+        spent = time.monotonic() - started
+        per_step = spent / max(done.step - done.start, 1)
+        step = done.step
+        state.add(stage, spent)
+        _log(stage, f"step {step}, {1 / per_step:.2f} steps/s", state.plan, state.used)
+    return step
+
+
+def fit(plan: FitPlan, device) -> Path:
+    """Run every stage not yet done; returns RUN/report/report.md."""
+    from gan.kinds.autoencoder import AUTOENCODER
+    from gan.kinds.sasgan import SASGAN
+    from sasmi.preprocess import check_size
+    from sasmi.scene import load_preset
+
+    check_size(plan.size)
+    preset = load_preset(plan.preset)  # a bad preset fails before anything is written
+    for flag, folder in (("--real", plan.real), ("--phi-real", plan.phi_real), ("--validation", plan.validation)):
+        if not list_images(folder):
+            raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
+    state = State(plan)
+    out = Path(plan.out)
+    budget = plan.minutes * 60
+
+    def stage_time(stage: str) -> float:
+        return SHARE[stage] * budget - state.seconds.get(stage, 0.0)
+
+    if "phi" not in state.done:  # trained once: a φ that moved under a trained GAN would void its φ loss
+        _log("phi", f"training on {plan.phi_real}", plan, state.used)
+        train_for(AUTOENCODER, {"size": plan.size, "seed": plan.seed}, out / "phi", {"real": plan.phi_real},
+                  device, stage_time("phi"), "phi", state)
+        state.add("phi", 0.0, done=True)
+
+    if "renders" not in state.done:
+        from sasmi.dataset import RenderJob, render_set
+
+        _log("renders", f"{plan.renders} chips of {preset.path}", plan, state.used)
+        started = time.monotonic()
+        render_set(RenderJob(preset=preset, out=out / "renders", count=plan.renders, seed=plan.seed, size=plan.size))
+        state.add("renders", time.monotonic() - started, done=True)
+
+    if "sasgan" not in state.done or stage_time("sasgan") > 60:
+        _log("sasgan", f"training on {plan.real} and the renders", plan, state.used)
+        train_for(SASGAN, {"size": plan.size, "seed": plan.seed}, out / "sasgan",
+                  {"real": plan.real, "renders": out / "renders", "phi": out / "phi"}, device, stage_time("sasgan"),
+                  "sasgan", state)
+        state.add("sasgan", 0.0, done=True)
+        state.done = [s for s in state.done if s not in ("translated", "report")]  # a longer GAN run: redo these
+
+    if "translated" not in state.done:
+        from gan.generator import load_generator
+        from gan.translate import translate_folder
+
+        _log("translated", "renders through the generator", plan, state.used)
+        started = time.monotonic()
+        translate_folder(load_generator(out / "sasgan", device), out / "renders", out / "translated")
+        state.add("translated", time.monotonic() - started, done=True)
+
+    path = out / "report" / "report.md"
+    if "report" not in state.done or not path.is_file():
+        _log("report", f"against {plan.validation}", plan, state.used)
+        started = time.monotonic()
+        path = report(plan, device)
+        state.add("report", time.monotonic() - started, done=True)
+    return path
+
+
+def report(plan: FitPlan, device) -> Path:
+    import functools
+
+    from sasmi.commands.evaluate_cmd import median_statistics
+    from sasmi.eval import report as rep
+    from sasmi.eval.features import as_encoder
+    from sasmi.eval.run import StderrLog, evaluate_folders
+
+    out = Path(plan.out)
+    encoder = as_encoder(out / "phi", device)
+    inputs = {"validation": plan.validation, "real (GAN)": plan.real, "phi real": plan.phi_real}
+    note = "" if Path(plan.validation).resolve() != Path(plan.real).resolve() else (
+        "\n\n> **Warning.** The report compares with the chips the GAN trained on: its figures are optimistic. "
+        "Pass `--validation` (see `sasmi split`).")
+    result = rep.Report({"inputs": inputs, "plan": asdict(plan)}, (rep.Section(
+        "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items()) + note),))
+    result += evaluate_folders(plan.validation, {"sasgan": out / "translated", "renders": out / "renders"}, encoder,
+                               out / "report", log=StderrLog("sasmi fit: [5/5 report]"),
+                               statistics=functools.partial(median_statistics, size=plan.size))
+    return rep.write_report(out / "report", result, title="sasmi fit: realism report")
+
+
+def with_defaults(plan: FitPlan) -> FitPlan:
+    return replace(plan, phi_real=plan.phi_real or plan.real, validation=plan.validation or plan.real)

@@ -1,0 +1,44 @@
+"""`sasmi fit`: every stage at 32 px on toy chips, resumable, refuses another plan in the same folder."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from sasmi.cli import main
+from sasmi.images import write_gray
+
+
+def _chips(folder, n, seed):
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        image = rng.gamma(6.0, 0.3 / 6.0, (32, 32)).astype(np.float32)
+        image[12:16, 12:15] = 0.8  # a highlight with its shadow to the right, as in the real chips
+        image[12:16, 15:24] *= 0.1
+        write_gray(folder / f"{i:03d}.png", image)
+    return folder
+
+
+def test_fit_runs_every_stage_then_resumes_without_retraining(tmp_path, capsys):
+    real, validation = _chips(tmp_path / "real", 12, 0), _chips(tmp_path / "val", 12, 1)
+    out = tmp_path / "run"
+    argv = ["fit", "--real", str(real), "--validation", str(validation), "--out", str(out), "--minutes", "0.05",
+            "--size", "32", "--renders", "8", "--preset", "cylinder_chip"]
+    assert main(argv) == 0
+    for folder in ("phi", "renders", "sasgan", "translated"):
+        assert (out / folder).is_dir(), folder
+    assert len(list((out / "translated" / "images").glob("*.png"))) == 8
+    metrics = json.loads((out / "report" / "metrics.json").read_text())
+    assert {"sasgan", "renders"} <= set(metrics["realism"]) and "image_statistics" in metrics
+    state = json.loads((out / "fit.json").read_text())
+    assert state["done"] == ["phi", "renders", "sasgan", "translated", "report"]
+    err = capsys.readouterr().err
+    assert "[3/5 sasgan]" in err and "min of the budget left" in err
+
+    last = out / "sasgan" / "checkpoints" / "last.pt"
+    stamp = last.stat().st_mtime_ns
+    assert main(argv) == 0  # a rerun finds every stage done
+    assert last.stat().st_mtime_ns == stamp
+
+    assert main([*argv[:-2], "--preset", "seafloor_only"]) == 2  # another plan into the same folder
+    assert "only --minutes may change" in capsys.readouterr().err
