@@ -10,7 +10,8 @@ scales each field (docs/differentiable.md):
     seafloor.roughness  rough + ripple relief        → seafloor.rms_height, seafloor.ripple_amplitude
     seafloor.albedo     floor reflectance (≤ 1)      → seafloor.albedo
     sonar.intensity     source level                 → sonar.intensity
-    sonar.elevation     altitude of the array        → sonar.max_range (altitude = max_range / 10)
+    sonar.elevation     altitude of the array        → sonar.altitude if the preset sets it, else
+                                                       sonar.max_range (altitude = max_range / 10)
 
 Adam works on the logarithm of the scales, so every parameter moves by a similar relative
 step and stays positive. The loss is `gan.losses.phi_loss` with margin 0: the distance
@@ -130,7 +131,10 @@ def scaled_preset(preset: Preset, scales: dict[str, float]) -> dict:
     """
     raw = copy.deepcopy(preset.raw)
     for name, scale in scales.items():
-        for section, key in PRESET_FIELDS[name]:
+        fields = PRESET_FIELDS[name]
+        if name == "sonar.elevation" and raw.get("sonar", {}).get("altitude"):
+            fields = (("sonar", "altitude"),)  # an altitude of its own: max_range stays
+        for section, key in fields:
             table = raw.setdefault(section, {})
             default = SECTIONS[section].__dataclass_fields__[key].default
             table[key] = _scale_value(table.get(key, default), scale, 1.0 if name == "seafloor.albedo" else None)
@@ -144,8 +148,8 @@ def scaled_preset(preset: Preset, scales: dict[str, float]) -> dict:
 def scale_bounds(scenes: Sequence[Scene], params: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """(P,) lowest and highest scale per parameter that keeps every fitted scene valid.
 
-    Albedo may not pass 1; the array may not sink below max_range = near_range + chip_size
-    (the altitude is max_range / 10 in the scene model, and the chip must lie within range).
+    Albedo may not pass 1; an array whose altitude is max_range / 10 (no sonar.altitude set)
+    may not sink below max_range = near_range + chip_size (the chip must lie within range).
     """
     low = np.full(len(params), 1.0 / SCALE_LIMIT)
     high = np.full(len(params), SCALE_LIMIT)
@@ -153,7 +157,8 @@ def scale_bounds(scenes: Sequence[Scene], params: Sequence[str]) -> tuple[np.nda
         if name == "seafloor.albedo":
             high[i] = min(SCALE_LIMIT, 1.0 / max(s.seafloor.albedo for s in scenes))
         if name == "sonar.elevation":
-            low[i] = max((s.sonar.near_range + s.sonar.chip_size) / s.sonar.max_range for s in scenes)
+            low[i] = max([(s.sonar.near_range + s.sonar.chip_size) / s.sonar.max_range
+                          for s in scenes if not s.sonar.altitude] + [1.0 / SCALE_LIMIT])
     return low, high
 
 

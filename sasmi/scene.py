@@ -27,6 +27,7 @@ from sasmi import limits
 from sasmi.errors import SasmiError
 
 SHAPES = ("cylinder", "sphere", "cone", "mesh")
+BACKSCATTER = ("lambert", "lambert2")
 
 
 def _positive(v: float) -> bool:
@@ -47,17 +48,19 @@ def _spec(default: Any, check: Callable[[Any], bool] | None = None, allowed: str
 
 @dataclass(frozen=True)
 class Sonar:
-    max_range: float = _spec(60.0, _positive, "> 0", "m; the array flies at altitude max_range / 10")
+    max_range: float = _spec(60.0, _positive, "> 0", "m; the array flies at altitude max_range / 10 unless altitude is set")
     near_range: float = _spec(30.0, _nonneg, ">= 0", "m; ground range of the chip's left edge")
     chip_size: float = _spec(6.0, _positive, "> 0", "m; ground extent of the square chip")
     track_length: float = _spec(20.0, _positive, "> 0", "m; synthetic aperture, centred on the chip")
     emitters: int = _spec(32, _positive, ">= 1", "spot lights evenly spaced along the track")
     cone_angle: float = _spec(30.0, lambda v: 0 < v < 90, "in (0, 90)", "deg; beam half-angle (cutoff)")
     intensity: float = _spec(1.0, _positive, "> 0", "source level, relative to the calibrated exposure")
+    altitude: float = _spec(0.0, _nonneg, ">= 0", "m; height of the array above the seafloor; 0 = max_range / 10")
 
     @property
-    def altitude(self) -> float:
-        return self.max_range / 10.0
+    def array_altitude(self) -> float:
+        """m; `altitude`, or max_range / 10 (the paper's geometry) when it is 0."""
+        return self.altitude or self.max_range / 10.0
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,8 @@ class Seafloor:
     ripple_direction: float = _spec(0.0, None, "", "deg; direction of the ripple wave vector from +x (range)")
     rocks: int = _spec(0, _nonneg, ">= 0", "number of rock/clutter bumps")
     rock_radius: float = _spec(0.15, _positive, "> 0", "m; size of each bump")
+    backscatter: str = _spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
+                             "scattering law: lambert (cos of incidence, as today), lambert2 (cos^2, Lambert's law)")
 
 
 @dataclass(frozen=True)
@@ -96,6 +101,14 @@ class Post:
     noise_std: float = _spec(0.0, _nonneg, ">= 0", "std of additive Gaussian noise in gray levels (0..1)")
     tvg: bool = _spec(True, None, "true or false",
                       "time-varying gain: divide out the flat-floor spreading and grazing loss, as sonars do")
+    tvg_strength: float = _spec(1.0, _unit, "in [0, 1]",
+                                "share of the TVG (an exponent): 1 evens out a flat floor, below 1 a range fall-off remains")
+    noise_floor: float = _spec(0.0, _nonneg, ">= 0",
+                               "gray level of the background under every echo (reverberation, ambient noise); "
+                               "speckled with it, it is the mean level of acoustic shadows")
+    speckle_cell_range: float = _spec(0.0, _nonneg, ">= 0", "m; resolution cell along range; speckle is correlated "
+                                      "over it (0 = independent per pixel)")
+    speckle_cell_track: float = _spec(0.0, _nonneg, ">= 0", "m; resolution cell along track (0 = independent per pixel)")
 
 
 @dataclass(frozen=True)

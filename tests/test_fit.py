@@ -64,7 +64,7 @@ def test_fitted_preset_renders_what_was_fitted(renderer):
     theta = torch.tensor(scene_parameters(scene) * [scales[p] for p in PARAMETERS])
     image = renderer.image(renderer.bind(scene), theta, scene.seed).numpy()
     fitted = Preset.from_dict(scaled_preset(preset, scales)).sample(0, 0)
-    assert fitted.sonar.altitude == pytest.approx(scene.sonar.altitude * 1.1)
+    assert fitted.sonar.array_altitude == pytest.approx(scene.sonar.array_altitude * 1.1)
     reference = Renderer(SIZE, SPP).render(fitted).image
     assert np.abs(image - reference).mean() < 1e-3 and np.abs(image - reference).max() < 0.05
 

@@ -29,7 +29,7 @@ PARAMETERS = ("seafloor.roughness", "seafloor.albedo", "sonar.intensity", "sonar
 
 def scene_parameters(scene: Scene) -> np.ndarray:
     """(4,) θ of `scene` in PARAMETERS order: roughness 1 (its own relief), albedo, intensity, altitude (m)."""
-    return np.array([1.0, scene.seafloor.albedo, scene.sonar.intensity, scene.sonar.altitude])
+    return np.array([1.0, scene.seafloor.albedo, scene.sonar.intensity, scene.sonar.array_altitude])
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ class BoundScene:
     targets_up: tuple  # mi.Float (3V_k,) each: 1 in z
     targets_lift: tuple[float, ...]  # relief under each target's anchor at roughness 1 (targets ride on it)
     speckle: object  # mi.Float (H·W,): multiplicative field, mean 1; all 1 when off
-    noise: object  # mi.Float (H·W,): additive field in gray levels; all 0 when off
+    noise: object  # mi.Float (H·W,): additive offset in gray levels (noise floor x speckle + noise)
 
 
 class DifferentiableRenderer:
@@ -111,8 +111,8 @@ class DifferentiableRenderer:
         floor_relief[:, 2] = relief.grid(self.size).ravel() * unit
         lifts = tuple(float(relief.at(t.x, t.y)) * unit for t in scene.targets)
         fields = post_fields(scene, self.size) if speckle else (np.ones((self.size, self.size)),
-                                                                np.zeros((self.size, self.size)))
-        mitsuba_scene = load_scene(self.mi, g, self.spp)
+                                                                np.full((self.size, self.size), scene.post.noise_floor))
+        mitsuba_scene = load_scene(self.mi, self.dr, g, self.spp)
         return BoundScene(
             scene=scene, geometry=g, mitsuba_scene=mitsuba_scene, params=self.mi.traverse(mitsuba_scene),
             floor_fixed=self._upload(g.floor.vertices - floor_relief),
@@ -167,24 +167,27 @@ class DifferentiableRenderer:
         aim = np.array([0.0, 0.0, -dr.detach(drop)[0]])
         for k, position in enumerate(g.emitter_positions):
             p[f"emitter_{k}.to_world"] = spot_to_world(mi, position, aim)
-        centre = self._irradiance(g.emitter_positions, height, 0.0, 0.0)
+        power = g.floor.cos_power
+        centre = self._irradiance(g.emitter_positions, height, 0.0, 0.0, power)
         p["emitter_0.intensity.value"] = intensity * self._opaque(b.scene.post.gain * np.pi) / centre  # exposure
         p.update()
 
         scene = b.mitsuba_scene
         radiance = scene.integrator().render(scene, scene.sensors()[0], seed=seed % 2**31, spp=self.spp,
                                              develop=True, evaluate=False).array  # (H·W,) row-major
-        if b.scene.post.tvg:
-            radiance = radiance * (centre / self._irradiance(g.emitter_positions, height, self._pixel_x,
-                                                             self._pixel_y))  # post.tvg_gain
+        post = b.scene.post
+        if post.tvg:  # post.tvg_gain
+            gain = centre / self._irradiance(g.emitter_positions, height, self._pixel_x, self._pixel_y, power)
+            radiance = radiance * (gain if post.tvg_strength == 1 else dr.power(gain, post.tvg_strength))
         image = dr.clip(radiance * b.speckle + b.noise, 0.0, 1.0)
         return mi.TensorXf(image, shape=(self.size, self.size))
 
-    def _irradiance(self, positions: np.ndarray, height, x, y):
-        """Σ over the emitters of cos θ / d² on a flat floor at (x, y), the array at `height` (chip units)."""
+    def _irradiance(self, positions: np.ndarray, height, x, y, cos_power: int = 1):
+        """Σ over the emitters of cos^p θ / d² on a flat floor at (x, y), the array at `height` (chip units)."""
         dr = self.dr
         total = 0.0
         for px, py in positions[:, :2].tolist():
             d2 = dr.square(self._opaque(px) - x) + dr.square(self._opaque(py) - y) + dr.square(height)
-            total = total + height / (dr.sqrt(d2) * d2)
+            cos_theta = height / dr.sqrt(d2)
+            total = total + (cos_theta if cos_power == 1 else dr.power(cos_theta, cos_power)) / d2
         return total

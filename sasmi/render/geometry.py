@@ -22,11 +22,15 @@ CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (ker
 SPHERE_SUBDIVISIONS = 3
 
 
+COS_POWER = {"lambert": 1, "lambert2": 2}  # seafloor.backscatter -> power of cos(incidence) in the radiance
+
+
 @dataclass(frozen=True)
 class TriangleMesh:
     vertices: np.ndarray  # (V, 3) float32, chip units
     faces: np.ndarray  # (F, 3) uint32, counter-clockwise seen from outside
     albedo: float
+    cos_power: int = 1  # radiance = albedo / pi * irradiance * cos(incidence)^(cos_power - 1)
 
 
 @dataclass(frozen=True)
@@ -44,7 +48,7 @@ class Geometry:
     @property
     def structure(self) -> tuple:
         """What must stay equal for a compiled renderer to be updated in place."""
-        return (self.size, len(self.floor.vertices), len(self.emitter_positions),
+        return (self.size, len(self.floor.vertices), self.floor.cos_power, len(self.emitter_positions),
                 tuple((len(t.vertices), len(t.faces)) for t in self.targets))
 
 
@@ -57,13 +61,13 @@ def grid_faces(n: int) -> np.ndarray:
     return np.concatenate([np.stack([v00, v01, v11], 1), np.stack([v00, v11, v10], 1)]).astype(np.uint32)
 
 
-def floor_mesh(heights_m: np.ndarray, chip_size: float, albedo: float) -> TriangleMesh:
+def floor_mesh(heights_m: np.ndarray, chip_size: float, albedo: float, cos_power: int = 1) -> TriangleMesh:
     n = heights_m.shape[0] - 1
     scale = 2.0 / chip_size
     coords = np.linspace(-1.0, 1.0, n + 1)
     x, y = np.meshgrid(coords, coords)
     vertices = np.stack([x, y, heights_m * scale], -1).reshape(-1, 3).astype(np.float32)
-    return TriangleMesh(vertices, _cached_grid_faces(n), albedo)
+    return TriangleMesh(vertices, _cached_grid_faces(n), albedo, cos_power)
 
 
 @lru_cache(maxsize=4)
@@ -145,39 +149,41 @@ def target_mesh(t: Target, floor: Surface, chip_size: float, where: str) -> Tria
 
 
 def emitter_positions(scene: Scene) -> np.ndarray:
-    """Emitters along the track (ground range 0) at altitude max_range / 10, in chip units."""
+    """Emitters along the track (ground range 0) at `sonar.array_altitude`, in chip units."""
     s = scene.sonar
     scale = 2.0 / s.chip_size
     track_x = -(s.near_range + s.chip_size / 2)
     ys = np.linspace(-s.track_length / 2, s.track_length / 2, s.emitters) if s.emitters > 1 else np.zeros(1)
-    return np.stack([np.full_like(ys, track_x), ys, np.full_like(ys, s.altitude)], 1) * scale
+    return np.stack([np.full_like(ys, track_x), ys, np.full_like(ys, s.array_altitude)], 1) * scale
 
 
-def exposure(positions: np.ndarray) -> float:
-    """1 / radiance of a flat albedo-1 Lambertian floor at the chip centre lit by unit spots.
+def exposure(positions: np.ndarray, cos_power: int = 1) -> float:
+    """1 / radiance of a flat albedo-1 floor at the chip centre lit by unit spots.
 
     Irradiance from each spot aimed at the centre is I cos(theta) / d^2 (no falloff on
-    the beam axis); Lambertian radiance is albedo / pi times the irradiance.
+    the beam axis); Lambertian radiance is albedo / pi times the irradiance, and Lambert's
+    cos^2 law (cos_power 2) weighs each spot's part by cos(theta) once more.
     """
     d2 = (positions**2).sum(1)
     cos_theta = positions[:, 2] / np.sqrt(d2)
-    return float(math.pi / (cos_theta / d2).sum())
+    return float(math.pi / (cos_theta**cos_power / d2).sum())
 
 
-def flat_floor_irradiance(positions: np.ndarray, size: int) -> np.ndarray:
-    """(size, size) sum of cos(theta) / d^2 over the emitters for a flat floor at pixel centres."""
+def flat_floor_irradiance(positions: np.ndarray, size: int, cos_power: int = 1) -> np.ndarray:
+    """(size, size) sum of cos(theta)^cos_power / d^2 over the emitters for a flat floor at pixel centres."""
     centres = (np.arange(size) + 0.5) / size * 2 - 1
     total = np.zeros((size, size))
     for px, py, pz in positions:
         d2 = ((px - centres) ** 2)[None, :] + ((py - centres) ** 2 + pz**2)[:, None]  # (rows = y, cols = x)
-        total += pz / (d2 * np.sqrt(d2))
+        cos_theta = pz / np.sqrt(d2)
+        total += (cos_theta if cos_power == 1 else cos_theta**cos_power) / d2
     return total
 
 
 def build_geometry(scene: Scene, size: int) -> Geometry:
     s = scene.sonar
     seabed = surface(scene.seafloor, s.chip_size, scene.seed)
-    floor = floor_mesh(seabed.grid(size), s.chip_size, scene.seafloor.albedo)
+    floor = floor_mesh(seabed.grid(size), s.chip_size, scene.seafloor.albedo, COS_POWER[scene.seafloor.backscatter])
     targets = tuple(target_mesh(t, seabed, s.chip_size, f"targets[{i}]") for i, t in enumerate(scene.targets))
     positions = emitter_positions(scene)
     return Geometry(
@@ -189,5 +195,5 @@ def build_geometry(scene: Scene, size: int) -> Geometry:
         aim=np.zeros(3),
         cone_angle=s.cone_angle,
         beam_width=0.75 * s.cone_angle,
-        emitter_intensity=s.intensity * scene.post.gain * exposure(positions),
+        emitter_intensity=s.intensity * scene.post.gain * exposure(positions, floor.cos_power),
     )

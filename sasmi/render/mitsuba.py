@@ -23,6 +23,8 @@ from sasmi.labels import ChipLabel
 from sasmi.preprocess import check_size
 from sasmi.masks import instance_ids
 from sasmi.render.annotate import chip_label, class_mask, labels_dict
+from sasmi.render.bsdf import bsdf_dict
+from sasmi.render.bsdf import register as register_bsdf
 from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.post import post_maps, postprocess
@@ -48,7 +50,7 @@ def spot_to_world(mi, position: np.ndarray, aim: np.ndarray):
     return mi.ScalarTransform4f().look_at(origin=position.tolist(), target=aim.tolist(), up=[0, 0, 1])
 
 
-def load_scene(mi, g: Geometry, spp: int):
+def load_scene(mi, dr, g: Geometry, spp: int):
     """A fresh Mitsuba scene showing `g`: floor, targets (target_k), one spot per emitter (emitter_k)."""
     # Mitsuba's camera x axis points left of the image; mirror it so range grows to the right.
     camera = (mi.ScalarTransform4f().look_at(origin=[0, 0, CAMERA_HEIGHT], target=[0, 0, 0], up=[0, -1, 0])
@@ -67,8 +69,10 @@ def load_scene(mi, g: Geometry, spp: int):
         },
     }
     for name, mesh in (("floor", g.floor), *((f"target_{k}", t) for k, t in enumerate(g.targets))):
+        if mesh.cos_power != 1:
+            register_bsdf(mi, dr)
         d[name] = mi_mesh(mi, name, mesh)
-        d[name].set_bsdf(mi.load_dict({"type": "diffuse", "reflectance": {"type": "uniform", "value": mesh.albedo}}))
+        d[name].set_bsdf(mi.load_dict(bsdf_dict(mesh.albedo, mesh.cos_power)))
     # One intensity texture shared by every spot: traverse lists it once, under emitter_0.
     intensity = mi.load_dict({"type": "uniform", "value": g.emitter_intensity})
     for k, p in enumerate(g.emitter_positions):
@@ -94,7 +98,7 @@ class Renderer:
 
     # -- scene construction -------------------------------------------------------------
     def _load(self, g: Geometry) -> None:
-        self._scene = load_scene(self.mi, g, self.spp)
+        self._scene = load_scene(self.mi, self.dr, g, self.spp)
         self._params = self.mi.traverse(self._scene)
         self._occluders = Occluders(self.mi, self.dr, g)
         self._target_ids = shape_ids(self.mi, self.dr, self._scene, len(g.targets))

@@ -1,47 +1,92 @@
-"""The sonar's image formation after the render: time-varying gain, speckle, additive noise.
+"""The sonar's image formation after the render: time-varying gain, speckle, noise floor, noise.
 
 Radiance (H, W), exposure folded in, goes to a chip in [0, 1] as
-    clip(radiance * gain * speckle + noise, 0, 1)
+    clip((radiance * gain + noise_floor) * speckle + noise, 0, 1)
+    = clip(radiance * gain * speckle + offset, 0, 1),   offset = noise_floor * speckle + noise
 The maps are numpy and depend only on the scene, so `Renderer.render` computes them while
-the Mitsuba kernel runs, and the differentiable render reuses the same speckle and noise.
+the Mitsuba kernel runs, and the differentiable render reuses the same speckle and offset.
+docs/physics.md says what each models.
 """
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
 from sasmi.render.geometry import Geometry, exposure, flat_floor_irradiance
 from sasmi.scene import Scene
 
-Maps = tuple[np.ndarray, np.ndarray, np.ndarray]  # (H, W) float64 each: gain, speckle, noise
+Maps = tuple[np.ndarray, np.ndarray, np.ndarray]  # (H, W) float64 each: gain, speckle, offset
+FWHM_PER_SIGMA = 2 * math.sqrt(2 * math.log(2))
 
 
-def tvg_gain(positions: np.ndarray, size: int) -> np.ndarray:
-    """(size, size) gain that makes a flat floor equally bright everywhere, 1 at the chip centre."""
-    return (math.pi / exposure(positions)) / flat_floor_irradiance(positions, size)
+def tvg_gain(positions: np.ndarray, size: int, cos_power: int = 1, strength: float = 1.0) -> np.ndarray:
+    """(size, size) gain, 1 at the chip centre; strength 1 makes a flat floor equally bright everywhere.
+
+    A partial TVG (strength < 1) applies that gain to the power `strength`, so a share of
+    the flat floor's fall-off with range remains, as in chips from a sonar whose TVG does
+    not quite follow spreading and grazing loss.
+    """
+    gain = (math.pi / exposure(positions, cos_power)) / flat_floor_irradiance(positions, size, cos_power)
+    return gain if strength == 1 else gain**strength
+
+
+@lru_cache(maxsize=8)
+def _gamma_quantiles(looks: float) -> tuple[np.ndarray, np.ndarray]:
+    """(z, q): the Gamma(looks, 1 / looks) quantile at the standard-normal quantile z, tabulated."""
+    from scipy.special import gammaincinv, ndtr
+
+    z = np.linspace(-8.0, 8.0, 8193)
+    return z, gammaincinv(looks, np.clip(ndtr(z), 1e-300, 1 - 1e-16)) / looks
+
+
+def correlated_gamma(rng: np.random.Generator, looks: float, size: int, sigma_rows: float, sigma_cols: float
+                     ) -> np.ndarray:
+    """(size, size) gamma speckle (mean 1, variance 1 / looks) correlated over a Gaussian cell (sigma in px).
+
+    A Gaussian field smoothed by the cell is mapped through the normal CDF and the gamma
+    quantile (a Gaussian copula): each pixel keeps the L-look gamma distribution, and
+    neighbours within a cell are alike, as in an image whose resolution cell spans pixels.
+    """
+    white = rng.standard_normal((size, size))
+    fy, fx = np.fft.fftfreq(size)[:, None], np.fft.rfftfreq(size)[None, :]
+    response = np.exp(-2 * np.pi**2 * ((fy * sigma_rows) ** 2 + (fx * sigma_cols) ** 2))
+    field = np.fft.irfft2(np.fft.rfft2(white) * response, s=(size, size))
+    field = (field - field.mean()) / field.std()
+    z, q = _gamma_quantiles(float(looks))
+    return np.interp(field, z, q)
 
 
 def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) speckle (gamma, mean 1; all 1 when off) and additive noise (gray levels; 0 when off), seeded by `scene`."""
+    """(H, W) speckle (mean 1; all 1 when off) and offset (noise floor x speckle + noise; gray levels)."""
     post = scene.post
     rng = np.random.default_rng([scene.seed, 11])
     speckle = np.ones((size, size))
     noise = np.zeros((size, size))
     if post.speckle_looks > 0:
-        speckle = rng.gamma(post.speckle_looks, 1.0 / post.speckle_looks, size=(size, size))
+        pixel = scene.sonar.chip_size / size  # m
+        if post.speckle_cell_range > 0 or post.speckle_cell_track > 0:
+            speckle = correlated_gamma(rng, post.speckle_looks, size, post.speckle_cell_track / pixel / FWHM_PER_SIGMA,
+                                       post.speckle_cell_range / pixel / FWHM_PER_SIGMA)
+        else:
+            speckle = rng.gamma(post.speckle_looks, 1.0 / post.speckle_looks, size=(size, size))
     if post.noise_std > 0:
         noise = rng.normal(0.0, post.noise_std, size=(size, size))
-    return speckle, noise
+    return speckle, noise + post.noise_floor * speckle
 
 
 def post_maps(scene: Scene, g: Geometry) -> Maps:
-    """(H, W) time-varying gain (1 when off), speckle (gamma, mean 1) and additive noise of `scene`."""
-    gain = tvg_gain(g.emitter_positions, g.size) if scene.post.tvg else np.ones((g.size, g.size))
+    """(H, W) time-varying gain (1 when off), speckle (mean 1) and additive offset of `scene`."""
+    post = scene.post
+    if post.tvg:
+        gain = tvg_gain(g.emitter_positions, g.size, g.floor.cos_power, post.tvg_strength)
+    else:
+        gain = np.ones((g.size, g.size))
     return (gain, *post_fields(scene, g.size))
 
 
 def postprocess(radiance: np.ndarray, maps: Maps) -> np.ndarray:
-    """(H, W) radiance -> (H, W) float32 chip in [0, 1]: radiance x gain x speckle + noise, clipped."""
-    gain, speckle, noise = maps
-    return np.clip(radiance.astype(np.float64) * gain * speckle + noise, 0.0, 1.0).astype(np.float32)
+    """(H, W) radiance -> (H, W) float32 chip in [0, 1]: radiance x gain x speckle + offset, clipped."""
+    gain, speckle, offset = maps
+    return np.clip(radiance.astype(np.float64) * gain * speckle + offset, 0.0, 1.0).astype(np.float32)

@@ -12,6 +12,7 @@ so the cross-check compares like with like:
   fade_distance D is 2 D^2 / d^2 to a relative error (D / d)^2 (< 1e-6 for any seafloor
   point 0.1 chip units from an emitter), so the light colour carries 1 / (2 D^2);
 - Lambertian finish: POV-Ray's `diffuse` has no 1/pi, so the light colour carries it;
+  `brilliance 2` (diffuse ~ cos^2 of incidence) for a floor with Lambert's cos^2 law;
   no ambient, no specular, `assumed_gamma 1` and `File_Gamma=1.0` keep it linear;
 - an orthographic camera straight down over the chip, its `right`/`up` vectors given
   explicitly (with `look_at` POV-Ray ignores the sign of `right` and mirrors the image).
@@ -90,16 +91,17 @@ def geometry_sdl(g: Geometry, title: str = "") -> str:
         f"    radius {g.beam_width:.9g} falloff {g.cone_angle:.9g} tightness 0",
         "    fade_distance Fade_Distance fade_power 2 }",
         "#end",
-        "#macro Lambertian(Albedo, Mask_Level)",
+        "#macro Lambertian(Albedo, Mask_Level, Brilliance)",
         "  #if (Target_Mask) texture { pigment { rgb Mask_Level } finish { ambient 0 diffuse 0 emission 1 } }",
-        "  #else texture { pigment { rgb Albedo } finish { ambient 0 diffuse 1 emission 0 specular 0 phong 0 } }",
+        "  #else texture { pigment { rgb Albedo } finish { ambient 0 diffuse 1 brilliance Brilliance emission 0 "
+        "specular 0 phong 0 } }",
         "  #end",
         "#end",
         "#if (!Target_Mask)",
         *(f"  Emitter({_vector(p)})" for p in g.emitter_positions),
         "#end",
-        _mesh2(g.floor, f"Lambertian({g.floor.albedo:.9g}, 0)"),
-        *(_mesh2(t, f"Lambertian({t.albedo:.9g}, 1)") for t in g.targets),
+        _mesh2(g.floor, f"Lambertian({g.floor.albedo:.9g}, 0, {g.floor.cos_power})"),
+        *(_mesh2(t, f"Lambertian({t.albedo:.9g}, 1, {t.cos_power})") for t in g.targets),
     ]
     return "\n".join(lines)
 
