@@ -1,6 +1,7 @@
 """Image folders as training batches: real chips, renders, both grayscale in [-1, 1].
 
-Every usable image is read once, resized so its shorter side equals `size`, and kept in
+A render set's masks (masks/NAME.png: 0 seafloor, 1 target, 2 shadow) come along when
+asked for, cropped and flipped with their images. Every usable image is read once, resized so its shorter side equals `size`, and kept in
 memory (N × size² float32: 1000 renders at 256² are 260 MB). Batches are cut from it by
 a `Batches` stream whose only randomness is its own torch.Generator, so the data order,
 crops and flips are part of a checkpoint and a resumed run sees the same batches as an
@@ -12,7 +13,10 @@ import os
 import warnings
 from pathlib import Path
 
+import numpy as np
 import torch
+import torch.nn.functional as F
+from PIL import Image
 
 from gan.run import fingerprint
 from sasmi.errors import SasmiError
@@ -23,24 +27,29 @@ from sasmi.preprocess import centre_crop, check_size, resize_short_side, unit_to
 class ImageSet:
     """All readable images under `folder` (recursive; a render set's images/ if present).
 
-    Unreadable files are skipped with a warning naming them; a folder with no usable
-    image is a SasmiError.
+    Unreadable files (and, with masks=True, images without a readable mask) are skipped
+    with a warning naming them; a folder with no usable image is a SasmiError.
     """
 
-    def __init__(self, folder: str | os.PathLike, size: int):
+    def __init__(self, folder: str | os.PathLike, size: int, masks: bool = False):
         check_size(size)
         self.folder = Path(folder)
         self.size = size
         self.paths: list[Path] = []
         self.images: list[torch.Tensor] = []  # each (1, h, w) in [0, 1], min(h, w) == size
+        self.masks: list[torch.Tensor] | None = [] if masks else None  # each (1, h, w) uint8 labels
+        if masks and not (self.folder / "masks").is_dir():
+            raise SasmiError(f"{self.folder}: no masks/ folder; the mask loss needs a render set")
         for path in list_images(self.folder):
             try:
-                image = read_gray(path)
+                image = resize_short_side(read_gray(path), size)
+                if self.masks is not None:
+                    self.masks.append(_read_mask(self.folder, path, image.shape[1:]))
             except SasmiError as e:
                 warnings.warn(f"skipping {e}", stacklevel=2)
                 continue
             self.paths.append(path)
-            self.images.append(resize_short_side(image, size))
+            self.images.append(image)
         if not self.images:
             raise SasmiError(f"{self.folder}: no readable image (png, jpg, tif, tiff, npy) in it")
 
@@ -54,6 +63,17 @@ class ImageSet:
     def center(self, indices: list[int]) -> torch.Tensor:
         """(B, 1, S, S) in [-1, 1], centre-cropped, no augmentation (fixed sample grids)."""
         return unit_to_signed(torch.stack([centre_crop(self.images[i], self.size) for i in indices]))
+
+
+def _read_mask(folder: Path, image_path: Path, shape: tuple[int, int]) -> torch.Tensor:
+    """masks/NAME.png of a render set's images/NAME.*, resized (nearest) to `shape`: (1, h, w) uint8."""
+    try:
+        path = (folder / "masks" / image_path.relative_to(folder / "images")).with_suffix(".png")
+        with Image.open(path) as im:
+            mask = torch.from_numpy(np.asarray(im.convert("L"), dtype=np.uint8).copy())[None, None]
+    except (OSError, ValueError) as e:
+        raise SasmiError(f"{folder / 'masks'}: cannot read the mask of {image_path.name} ({e})") from None
+    return F.interpolate(mask.float(), size=tuple(shape), mode="nearest")[0].to(torch.uint8)
 
 
 class Batches:
@@ -80,18 +100,23 @@ class Batches:
 
     def next(self) -> torch.Tensor:
         """(B, 1, S, S) in [-1, 1] on the CPU."""
-        size = self.images.size
-        out = []
+        return self.next_with_masks()[0]
+
+    def next_with_masks(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(B, 1, S, S) in [-1, 1] and, for a set read with masks, their (B, 1, S, S) uint8 labels."""
+        size, masks = self.images.size, self.images.masks
+        out, out_masks = [], []
         for _ in range(self.batch):
-            image = self.images.images[self._next_index()]
-            _, h, w = image.shape
+            i = self._next_index()
+            _, h, w = self.images.images[i].shape
             top = int(torch.randint(h - size + 1, (), generator=self.rng))
             left = int(torch.randint(w - size + 1, (), generator=self.rng))
-            crop = image[:, top:top + size, left:left + size]
-            if torch.rand((), generator=self.rng) < 0.5:
-                crop = crop.flip(-2)  # along-track (image y)
-            out.append(crop)
-        return unit_to_signed(torch.stack(out))
+            flip = bool(torch.rand((), generator=self.rng) < 0.5)  # along-track (image y) only
+            for source, sink in ((self.images.images, out), (masks, out_masks)):
+                if source is not None:
+                    crop = source[i][:, top:top + size, left:left + size]
+                    sink.append(crop.flip(-2) if flip else crop)
+        return unit_to_signed(torch.stack(out)), torch.stack(out_masks) if masks is not None else None
 
     def state_dict(self) -> dict:
         return {"rng": self.rng.get_state(), "order": self.order.clone(), "pos": self.pos}

@@ -67,10 +67,14 @@ class Generator(nn.Module):
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",
                    checkpoint: str = "last") -> Generator:
-    """The SAS GAN generator of a run: (B, 1, S, S) in [-1, 1] → same; `.image_size` = S; eval mode."""
+    """The SAS GAN generator of a run (its moving average when the run kept one):
+    (B, 1, S, S) in [-1, 1] → same; `.image_size` = S; eval mode."""
     saved = read_run(run_dir, "sasgan", checkpoint)
     generator = Generator(config_from_dict(GeneratorConfig, saved.config.get("generator", {}), str(saved.path)))
-    load_weights(generator, saved, "generator")
+    if "generator_ema" in saved.state:  # the moving average translates better than the last weights
+        load_weights(generator, saved, "generator_ema", prefix="module.")
+    else:
+        load_weights(generator, saved, "generator")
     generator = generator.to(device).eval().requires_grad_(False)
     generator.image_size, generator.checkpoint = saved.config["size"], saved.path
     return generator

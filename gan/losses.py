@@ -1,14 +1,18 @@
 """Losses as pure functions of scores, images and features; the training loop weights them.
 
 WGAN-GP (Gulrajani et al. 2017): the critic maximises mean D(real) − mean D(fake) while
-a penalty keeps its gradient norm near 1 at random interpolates, λ = 10. The SAS GAN adds
-the φ constraint of Reed et al.: the generator may change an image's φ only by a margin.
+a penalty keeps its gradient norm near 1 at random interpolates, λ = 10. The alternative
+is StyleGAN2's pair: the non-saturating logistic loss with the R1 penalty on real images
+(Mescheder et al. 2018); R1 needs the logistic loss, since under the Wasserstein loss
+nothing would bound the fake scores. The SAS GAN adds the φ constraint of Reed et al.
+(the generator may change an image's φ only by a margin) and a mask-driven contrast term.
 """
 from __future__ import annotations
 
 from typing import Callable
 
 import torch
+import torch.nn.functional as F
 
 
 def critic_loss(real_scores: torch.Tensor, fake_scores: torch.Tensor) -> torch.Tensor:
@@ -35,6 +39,23 @@ def gradient_penalty(critic: Callable[[torch.Tensor], torch.Tensor], real: torch
     return ((grad.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
 
 
+def logistic_critic_loss(real_scores: torch.Tensor, fake_scores: torch.Tensor) -> torch.Tensor:
+    """Non-saturating GAN, critic side: mean softplus(D(fake)) + mean softplus(−D(real)); (B,) → scalar."""
+    return F.softplus(fake_scores).mean() + F.softplus(-real_scores).mean()
+
+
+def logistic_generator_loss(fake_scores: torch.Tensor) -> torch.Tensor:
+    """Non-saturating GAN, generator side: mean softplus(−D(G(·))); (B,) → scalar."""
+    return F.softplus(-fake_scores).mean()
+
+
+def r1_penalty(critic: Callable[[torch.Tensor], torch.Tensor], real: torch.Tensor) -> torch.Tensor:
+    """mean over the batch of ‖∇ₓ D(x)‖₂² at the real images (B, 1, S, S); the caller weights it by γ/2."""
+    x = real.detach().requires_grad_(True)
+    (grad,) = torch.autograd.grad(critic(x).sum(), x, create_graph=True)
+    return grad.flatten(1).pow(2).sum(dim=1).mean()
+
+
 def phi_loss(phi_a: torch.Tensor, phi_b: torch.Tensor, margin: float) -> torch.Tensor:
     """Hinge on the relative φ distance: mean over the batch of max(0, ‖φa − φb‖ / ‖φa‖ − γ).
 
@@ -51,3 +72,42 @@ def phi_loss(phi_a: torch.Tensor, phi_b: torch.Tensor, margin: float) -> torch.T
 def reconstruction_loss(reconstruction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Mean squared error (the autoencoder's L2), images in [-1, 1]."""
     return ((reconstruction - target) ** 2).mean()
+
+
+def mask_contrasts(images: torch.Tensor, masks: torch.Tensor, ring: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per image: (floor − shadow, target − floor) mean brightness, each (B,), NaN where absent.
+
+    images: (B, 1, S, S) in [-1, 1]; masks: (B, 1, S, S) labels 0 seafloor, 1 target, 2 shadow.
+    "floor" is the seafloor within `ring` px of the shadow (for the first) or of the target
+    (for the second): the local background the eye compares them with.
+    """
+    floor = masks == 0
+
+    def mean(region: torch.Tensor) -> torch.Tensor:
+        n = region.sum(dim=(1, 2, 3))
+        total = (images * region).sum(dim=(1, 2, 3))
+        return torch.where(n > 0, total / n.clamp_min(1), torch.full_like(total, float("nan")))
+
+    def near(region: torch.Tensor) -> torch.Tensor:
+        return F.max_pool2d(region.float(), 2 * ring + 1, stride=1, padding=ring).bool() & floor
+
+    shadow, target = masks == 2, masks == 1
+    return mean(near(shadow)) - mean(shadow), mean(target) - mean(near(target))
+
+
+def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Tensor, keep: float,
+                       ring: int) -> torch.Tensor:
+    """Hinge keeping shadows darker and highlights brighter than the floor around them.
+
+    For each image and each of (shadow, highlight) present in its mask: max(0, keep·c_render
+    − c_fake), c the contrast of `mask_contrasts`; mean over the terms present (0 if none).
+    fake, render: (B, 1, S, S) in [-1, 1]; masks: the render's labels. keep = 0.5 lets the
+    generator halve a render's shadow contrast for free but not erase or invert it.
+    """
+    with torch.no_grad():
+        wanted = torch.stack(mask_contrasts(render, masks, ring)).clamp_min(0) * keep  # (2, B)
+    got = torch.stack(mask_contrasts(fake, masks, ring))
+    present = ~torch.isnan(got)
+    if not present.any():
+        return fake.sum() * 0.0  # keeps the graph; no shadow or target in this batch
+    return (wanted[present] - got[present]).clamp_min(0.0).mean()

@@ -161,11 +161,15 @@ def read_run(run_dir: str | os.PathLike, kind: str, which: str = "last") -> Save
     return read_checkpoint(path, kind)
 
 
-def load_weights(module: torch.nn.Module, saved: Saved, name: str) -> None:
-    """saved.state[name] into `module`, or a SasmiError naming the file (another architecture)."""
+def load_weights(module: torch.nn.Module, saved: Saved, name: str, prefix: str = "") -> None:
+    """saved.state[name] (its `prefix` entries, prefix removed) into `module`, or a SasmiError
+    naming the file (weights of another architecture)."""
     try:
-        module.load_state_dict(saved.state[name])
-    except (KeyError, RuntimeError, TypeError, ValueError) as e:
+        state = saved.state[name]
+        if prefix:
+            state = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
+        module.load_state_dict(state)
+    except (KeyError, RuntimeError, TypeError, ValueError, AttributeError) as e:
         raise SasmiError(f"{saved.path}: its {name} weights do not fit the network its config describes "
                          f"({_one_line(e)})") from None
 

@@ -15,7 +15,7 @@ from gan.critic import Critic, CriticConfig
 from gan.data import ImageSet
 from gan.generator import GeneratorConfig
 from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.common import GanRun, Noise, critic_phase
+from gan.kinds.common import GanRun, Noise, critic_phase, critic_view
 from gan.kinds.sasgan import SASGAN, SasganRun
 from gan.loop import train
 from gan.losses import phi_loss
@@ -30,14 +30,15 @@ def _stream(mean: float, rng: torch.Generator, batch: int = 8):
     return lambda: (mean + 0.2 * torch.randn(batch, 1, SIZE, SIZE, generator=rng)).clamp(-1, 1)
 
 
-def _trained_critic(gp_weight: float, steps: int = 40):
+def _trained_critic(gp_weight: float = 10.0, steps: int = 40, **overrides):
     """A critic trained on bright 'real' against dark 'fake' toy images; returns it and the streams."""
     torch.manual_seed(0)
     rng = torch.Generator().manual_seed(1)
     real, fake = _stream(0.3, rng), _stream(-0.3, rng)
     critic = Critic(CriticConfig(4), SIZE)
     opt = torch.optim.Adam(critic.parameters(), lr=1e-3, betas=(0.5, 0.9))
-    step = critic_phase(GanRun(size=SIZE, gp_weight=gp_weight), critic, opt, real, fake, Noise(0), CPU)
+    cfg = replace(GanRun(size=SIZE, gp_weight=gp_weight), **overrides)
+    step = critic_phase(cfg, critic, opt, real, fake, critic_view(cfg, Noise(2)), Noise(0), CPU)
     for _ in range(steps):
         logs = step()
     return critic, real, fake, logs

@@ -112,7 +112,8 @@ def test_sasgan_run_writes_checkpoints_samples_and_log(tmp_path, chips, renders,
     assert list((out / "tb").glob("events.out.tfevents.*"))
     for which in ("last", "best"):
         ckpt = torch.load(out / "checkpoints" / f"{which}.pt", weights_only=True)
-        assert set(ckpt["state"]) == {"generator", "critic", "opt_g", "opt_c", "real", "renders", "noise"}
+        assert set(ckpt["state"]) == {"generator", "generator_ema", "critic", "opt_g", "opt_c", "real", "renders",
+                                      "noise", "view_noise"}
     assert torch.load(out / "checkpoints" / "last.pt", weights_only=True)["step"] == 20
     assert not list(out.rglob("*.tmp*"))  # atomic writes left nothing behind
 

@@ -65,6 +65,8 @@ def _one_line_error(capsys, argv, *names):
     (["--size", "40"], "--size 40"), (["--size", "4096"], "--size 4096"),
     (["--checkpoint-every", "0"], "--checkpoint-every 0"), (["--gp-weight", "inf"], "--gp-weight inf"),
     (["--phi-weight", "-1"], "--phi-weight -1"), (["--phi-margin", "nan"], "--phi-margin nan"),
+    (["--critic-lr", "0"], "--critic-lr 0"), (["--r1-gamma", "-1"], "--r1-gamma -1"), (["--ema", "1.5"], "--ema 1.5"),
+    (["--mask-weight", "nan"], "--mask-weight nan"), (["--mask-keep", "-0.5"], "--mask-keep -0.5"),
     (["--seed", "-1"], "--seed -1"), (["--threads", "0"], "--threads 0"), (["--device", "tpu"], "--device 'tpu'"),
 ])
 def test_bad_training_flags_are_one_line_naming_the_flag(tmp_path, capsys, runs, flags, named):

@@ -2,14 +2,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterable
 
 import torch
 
+from gan.augment import AugmentConfig, augment
 from gan.critic import Critic, CriticConfig
 from gan.loop import Logs
-from gan.losses import critic_loss, gradient_penalty
+from gan.losses import (critic_loss, generator_loss, gradient_penalty, logistic_critic_loss, logistic_generator_loss,
+                        r1_penalty)
 from gan.run import RunConfig, check_number
+from sasmi.errors import SasmiError
+
+REGULARISERS = ("gp", "r1")
 
 
 @dataclass(frozen=True)
@@ -18,18 +23,32 @@ class GanRun(RunConfig):
     betas: tuple[float, float] = (0.5, 0.9)  # WGAN-GP's β2 = 0.9 with DCGAN's β1 = 0.5
     best_from: int = 500  # the Wasserstein estimate is near zero while the critic is still untrained
     n_critic: int = 5  # critic updates per generator update (WGAN-GP)
+    critic_lr: float | None = None  # the critic's Adam rate; None: the same as lr
+    regulariser: str = "gp"  # "gp": Wasserstein loss + gradient penalty; "r1": logistic loss + R1 (StyleGAN2)
     gp_weight: float = 10.0  # λ of the gradient penalty (WGAN-GP, Reed et al.)
+    r1_gamma: float = 1.0  # γ of R1 (penalty γ/2·‖∇D(real)‖²); StyleGAN2-ADA's rule gives 0.8 at 128², batch 4
+    augment: AugmentConfig = AugmentConfig()  # what the critic sees of real and fake alike; off by default
     critic: CriticConfig = CriticConfig()
 
     def validate(self) -> "GanRun":
         super().validate()
         check_number("--n-critic", self.n_critic, 1, 100, integer=True, why="critic updates per generator update")
+        if self.critic_lr is not None:
+            check_number("--critic-lr", self.critic_lr, 1e-8, 1.0)
+        if self.regulariser not in REGULARISERS:
+            raise SasmiError(f"--regulariser {self.regulariser}: expected one of {', '.join(REGULARISERS)}")
         check_number("--gp-weight", self.gp_weight, 0.0, 1e4)
+        check_number("--r1-gamma", self.r1_gamma, 0.0, 1e4)
+        a = self.augment
+        check_number("augment.translation", a.translation, 0.0, 0.5)
+        check_number("augment.cutout", a.cutout, 0.0, 1.0)
+        check_number("augment.brightness", a.brightness, 0.0, 1.0)
+        check_number("augment.contrast", a.contrast, 0.0, 1.0)
         return self
 
 
 class Noise:
-    """The run's own random stream for GP interpolates and latent codes (CPU, resumable)."""
+    """One of the run's own random streams (GP interpolates, latent codes, augmentation); CPU, resumable."""
 
     def __init__(self, seed: int):
         self.rng = torch.Generator().manual_seed(seed)
@@ -45,6 +64,10 @@ class Noise:
 
     def load_state_dict(self, state: dict) -> None:
         self.rng.set_state(state["rng"])
+
+
+def adam(params: Iterable[torch.nn.Parameter], lr: float, cfg: RunConfig) -> torch.optim.Adam:
+    return torch.optim.Adam(params, lr=lr, betas=cfg.betas)
 
 
 def grad_norm(module: torch.nn.Module) -> float:
@@ -68,22 +91,42 @@ def before_after(model: torch.nn.Module, fixed: torch.Tensor) -> list[torch.Tens
     return rows
 
 
+def critic_view(cfg: GanRun, noise: Noise) -> Callable[[torch.Tensor], torch.Tensor]:
+    """What the critic sees of an image batch: cfg.augment's differentiable transforms."""
+    return lambda x: augment(x, cfg.augment, noise.rng)
+
+
+def adversarial_loss(cfg: GanRun, fake_scores: torch.Tensor) -> torch.Tensor:
+    """The generator's side of cfg.regulariser's objective; (B,) → scalar."""
+    return generator_loss(fake_scores) if cfg.regulariser == "gp" else logistic_generator_loss(fake_scores)
+
+
 def critic_phase(cfg: GanRun, critic: Critic, opt: torch.optim.Optimizer, real: Callable[[], torch.Tensor],
-                 fake: Callable[[], torch.Tensor], noise: Noise, device: torch.device) -> Callable[[], Logs]:
-    """One WGAN-GP critic update on a fresh real batch and a fresh (detached) fake batch."""
+                 fake: Callable[[], torch.Tensor], view: Callable[[torch.Tensor], torch.Tensor], noise: Noise,
+                 device: torch.device) -> Callable[[], Logs]:
+    """One critic update on a fresh real batch and a fresh (detached) fake batch, both seen through `view`."""
 
     def step() -> Logs:
         critic.requires_grad_(True)
-        x_real = real()  # (B, 1, S, S) in [-1, 1]
+        x_real = view(real())  # (B, 1, S, S) in [-1, 1] (roughly: brightness may push past)
         with torch.no_grad():
-            x_fake = fake()  # (B, 1, S, S) in [-1, 1], no gradient to the generator
-        loss = critic_loss(critic(x_real), critic(x_fake))  # −W
-        penalty = gradient_penalty(critic, x_real, x_fake, noise.uniform(len(x_real), 1, 1, 1).to(device))
+            x_fake = view(fake())  # (B, 1, S, S), no gradient to the generator
+        s_real, s_fake = critic(x_real), critic(x_fake)  # (B,) scores
+        if cfg.regulariser == "gp":
+            loss = critic_loss(s_real, s_fake)  # −W
+            alpha = noise.uniform(len(x_real), 1, 1, 1).to(device)
+            penalty = gradient_penalty(critic, x_real, x_fake, alpha)
+            total = loss + cfg.gp_weight * penalty
+        else:
+            loss = logistic_critic_loss(s_real, s_fake)
+            penalty = r1_penalty(critic, x_real)
+            total = loss + 0.5 * cfg.r1_gamma * penalty
         opt.zero_grad(set_to_none=True)
-        (loss + cfg.gp_weight * penalty).backward()
+        total.backward()
         norm = grad_norm(critic)
         opt.step()
         critic.requires_grad_(False)
-        return {"loss/wasserstein": -loss.item(), "loss/gp": penalty.item(), "grad_norm/critic": norm}
+        return {"loss/wasserstein": (s_real.mean() - s_fake.mean()).item(), "loss/critic": loss.item(),
+                f"loss/{cfg.regulariser}": penalty.item(), "grad_norm/critic": norm}
 
     return step

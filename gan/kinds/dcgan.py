@@ -9,9 +9,8 @@ import torch
 from gan.critic import Critic
 from gan.data import Batches, ImageSet
 from gan.dcgan import DCGANConfig, DCGANGenerator, sample
-from gan.kinds.common import GanRun, Noise, critic_phase, grad_norm
+from gan.kinds.common import GanRun, Noise, adam, adversarial_loss, critic_phase, critic_view, grad_norm
 from gan.loop import Kind, Logs, Phases
-from gan.losses import generator_loss
 from gan.run import check_number
 from sasmi.images import write_gray
 
@@ -31,24 +30,25 @@ def build(cfg: DcganRun, inputs: dict[str, Path], device: torch.device) -> Phase
     # ---- data and the run's noise stream
     real = ImageSet(inputs["real"], cfg.size)
     real_batches = Batches(real, cfg.batch, seed=cfg.seed)
-    noise = Noise(cfg.seed + 2)
+    noise, view_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4)
     fixed_z = torch.randn(16, cfg.dcgan.z_dim, generator=torch.Generator().manual_seed(cfg.seed + 3)).to(device)
 
     # ---- models and optimisers
     generator = DCGANGenerator(cfg.dcgan, cfg.size).to(device)
     critic = Critic(cfg.critic, cfg.size).to(device)
-    opt_g = torch.optim.Adam(generator.parameters(), lr=cfg.lr, betas=cfg.betas)
-    opt_c = torch.optim.Adam(critic.parameters(), lr=cfg.lr, betas=cfg.betas)
+    opt_g = adam(generator.parameters(), cfg.lr, cfg)
+    opt_c = adam(critic.parameters(), cfg.critic_lr or cfg.lr, cfg)
+    view = critic_view(cfg, view_noise)  # real and fake alike
 
     def codes() -> torch.Tensor:
         return noise.normal(cfg.batch, cfg.dcgan.z_dim).to(device)  # (B, z_dim) standard normal
 
     critic_step = critic_phase(cfg, critic, opt_c, lambda: real_batches.next().to(device),
-                               lambda: generator(codes()), noise, device)
+                               lambda: generator(codes()), view, noise, device)
 
     def generator_step() -> Logs:
         """Fool the critic."""
-        adversarial = generator_loss(critic(generator(codes())))
+        adversarial = adversarial_loss(cfg, critic(view(generator(codes()))))
         opt_g.zero_grad(set_to_none=True)
         adversarial.backward()
         norm = grad_norm(generator)
@@ -68,7 +68,7 @@ def build(cfg: DcganRun, inputs: dict[str, Path], device: torch.device) -> Phase
         generator.train()
 
     return Phases(state={"generator": generator, "critic": critic, "opt_g": opt_g, "opt_c": opt_c,
-                         "real": real_batches, "noise": noise},
+                         "real": real_batches, "noise": noise, "view_noise": view_noise},
                   inputs={"real": (str(inputs["real"]), real.fingerprint())},
                   generator_step=generator_step, samples=samples, score="loss/wasserstein",
                   critic_step=critic_step, critic_steps=cfg.n_critic, finish=finish)

@@ -1,18 +1,21 @@
-"""The SAS GAN run: render → realistic image, WGAN-GP critic + the φ constraint (Reed et al.)."""
+"""The SAS GAN run: render → realistic image, an adversarial critic + the φ constraint (Reed et al.)
++ the small-data recipe: critic augmentation, a generator moving average, a mask contrast term."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from torch.optim.swa_utils import AveragedModel
 
 from gan.autoencoder import load_encoder
 from gan.critic import Critic
 from gan.data import Batches, ImageSet
 from gan.generator import Generator, GeneratorConfig
-from gan.kinds.common import GanRun, Noise, before_after, critic_phase, grad_norm, spread
+from gan.kinds.common import (GanRun, Noise, adam, adversarial_loss, before_after, critic_phase, critic_view,
+                              grad_norm, spread)
 from gan.loop import Kind, Logs, Phases
-from gan.losses import generator_loss, phi_loss
+from gan.losses import mask_contrast_loss, phi_loss
 from gan.run import check_number, file_fingerprint
 from sasmi.errors import SasmiError
 
@@ -22,20 +25,40 @@ class SasganRun(GanRun):
     generator: GeneratorConfig = GeneratorConfig()
     phi_weight: float = 100.0  # at 10 the adversarial term wins and content is lost (docs/gan.md)
     phi_margin: float = 0.25  # γ: φ(G(render)) may move this fraction of ‖φ(render)‖ for free (docs/gan.md)
+    ema: float = 0.999  # decay of the generator's moving average that translates (0: none); ramped in early on
+    mask_weight: float = 0.0  # weight of the mask contrast term (needs the renders' masks/); 0: off
+    mask_keep: float = 0.5  # fraction of a render's shadow/highlight contrast the translation must keep
+    mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
 
     def validate(self) -> "SasganRun":
         super().validate()
         check_number("--phi-weight", self.phi_weight, 0.0, 1e6)
         check_number("--phi-margin", self.phi_margin, 0.0, 10.0, why="a fraction of ‖φ(render)‖")
+        check_number("--ema", self.ema, 0.0, 0.99999, why="0 turns it off")
+        check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
+        check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
+        check_number("--mask-ring", self.mask_ring, 1, self.size // 2, integer=True, why="pixels, below S/2")
         return self
+
+
+def moving_average(generator: Generator, decay: float) -> AveragedModel:
+    """An exponential moving average of the generator's weights, its decay ramped up as
+    (1 + n)/(10 + n) over the first updates so that the random initialisation fades fast."""
+
+    def average(avg: torch.Tensor, new: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+        beta = min(decay, (1.0 + float(n)) / (10.0 + float(n)))
+        return avg + (new - avg) * (1.0 - beta)
+
+    return AveragedModel(generator, avg_fn=average, use_buffers=True)
 
 
 def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phases:
     # ---- data and the frozen φ encoder
-    real, renders = ImageSet(inputs["real"], cfg.size), ImageSet(inputs["renders"], cfg.size)
+    real = ImageSet(inputs["real"], cfg.size)
+    renders = ImageSet(inputs["renders"], cfg.size, masks=cfg.mask_weight > 0)
     real_batches = Batches(real, cfg.batch, seed=cfg.seed)
     render_batches = Batches(renders, cfg.batch, seed=cfg.seed + 1)
-    noise = Noise(cfg.seed + 2)
+    noise, view_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4)
     fixed = renders.center(spread(len(renders), 8)).to(device)  # (n, 1, S, S) in [-1, 1]
     encoder = load_encoder(inputs["phi"], device)  # (B, 1, S, S) in [-1, 1] → (B, 1024)
     if encoder.image_size != cfg.size:
@@ -45,34 +68,48 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     # ---- models and optimisers
     generator = Generator(cfg.generator).to(device)
     critic = Critic(cfg.critic, cfg.size).to(device)
-    opt_g = torch.optim.Adam(generator.parameters(), lr=cfg.lr, betas=cfg.betas)
-    opt_c = torch.optim.Adam(critic.parameters(), lr=cfg.lr, betas=cfg.betas)
+    average = moving_average(generator, cfg.ema) if cfg.ema > 0 else None
+    opt_g = adam(generator.parameters(), cfg.lr, cfg)
+    opt_c = adam(critic.parameters(), cfg.critic_lr or cfg.lr, cfg)
+    view = critic_view(cfg, view_noise)  # real and fake alike
 
-    def render_batch() -> torch.Tensor:
-        return render_batches.next().to(device)  # (B, 1, S, S) in [-1, 1]
+    def render_batch() -> tuple[torch.Tensor, torch.Tensor | None]:
+        x, masks = render_batches.next_with_masks()  # (B, 1, S, S) in [-1, 1]; uint8 labels or None
+        return x.to(device), None if masks is None else masks.to(device)
 
     critic_step = critic_phase(cfg, critic, opt_c, lambda: real_batches.next().to(device),
-                               lambda: generator(render_batch()), noise, device)
+                               lambda: generator(render_batch()[0]), view, noise, device)
 
     def generator_step() -> Logs:
-        """Fool the critic while φ(G(render)) stays within γ of φ(render)."""
-        render = render_batch()
+        """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
+        render, masks = render_batch()
         fake = generator(render)  # (B, 1, S, S) in [-1, 1]
-        adversarial = generator_loss(critic(fake))
+        adversarial = adversarial_loss(cfg, critic(view(fake)))
         constraint = phi_loss(encoder(render), encoder(fake), cfg.phi_margin)
+        loss = adversarial + cfg.phi_weight * constraint
+        logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
+        if masks is not None:
+            contrast = mask_contrast_loss(fake, render, masks, cfg.mask_keep, cfg.mask_ring)
+            loss = loss + cfg.mask_weight * contrast
+            logs["loss/mask"] = contrast.item()
         opt_g.zero_grad(set_to_none=True)
-        (adversarial + cfg.phi_weight * constraint).backward()
-        norm = grad_norm(generator)
+        loss.backward()
+        logs["grad_norm/generator"] = grad_norm(generator)
         opt_g.step()
-        return {"loss/generator": adversarial.item(), "loss/phi": constraint.item(), "grad_norm/generator": norm}
+        if average is not None:
+            average.update_parameters(generator)
+        return logs
 
-    phi_ckpt = Path(encoder.checkpoint)
-    return Phases(state={"generator": generator, "critic": critic, "opt_g": opt_g, "opt_c": opt_c,
-                         "real": real_batches, "renders": render_batches, "noise": noise},
+    state = {"generator": generator, "critic": critic, "opt_g": opt_g, "opt_c": opt_c,
+             "real": real_batches, "renders": render_batches, "noise": noise, "view_noise": view_noise}
+    if average is not None:
+        state["generator_ema"] = average
+    return Phases(state=state,
                   inputs={"real": (str(inputs["real"]), real.fingerprint()),
                           "renders": (str(inputs["renders"]), renders.fingerprint()),
-                          "phi": (str(inputs["phi"]), file_fingerprint(phi_ckpt))},
-                  generator_step=generator_step, samples=lambda: before_after(generator, fixed),
+                          "phi": (str(inputs["phi"]), file_fingerprint(Path(encoder.checkpoint)))},
+                  generator_step=generator_step,
+                  samples=lambda: before_after(average.module if average is not None else generator, fixed),
                   score="loss/wasserstein", critic_step=critic_step, critic_steps=cfg.n_critic)
 
 

@@ -12,8 +12,8 @@ import functools
 from sasmi.commands.common import add_device, add_threads, apply_threads, resolve_device
 
 NETS = ("small", "paper")
-TRAINING_FLAGS = ("steps", "size", "batch", "lr", "seed", "betas", "checkpoint_every", "n_critic", "gp_weight",
-                  "phi_weight", "phi_margin")
+TRAINING_FLAGS = ("steps", "size", "batch", "lr", "seed", "betas", "checkpoint_every", "n_critic", "critic_lr",
+                  "regulariser", "gp_weight", "r1_gamma", "phi_weight", "phi_margin", "ema", "mask_weight", "mask_keep")
 
 
 def _kind(name: str):
@@ -35,7 +35,7 @@ class _DefaultsHelp(argparse.HelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         defaults = _kind(self.kind).config()
-        if hasattr(defaults, action.dest) and action.dest not in ("critic", "generator", "dcgan"):
+        if hasattr(defaults, action.dest) and action.dest not in ("critic", "generator", "dcgan", "augment"):
             return f"{action.help} (default {getattr(defaults, action.dest)})"
         return action.help
 
@@ -43,22 +43,29 @@ class _DefaultsHelp(argparse.HelpFormatter):
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real", required=True, metavar="DIR", help="real images, searched recursively")
     p.add_argument("--out", required=True, metavar="RUN", help="run folder to create (or to continue with --resume)")
-    p.add_argument("--steps", type=int, help=f"total updates to reach")
-    p.add_argument("--size", type=int, help=f"image size S, a multiple of 16")
-    p.add_argument("--batch", type=int, help=f"batch size")
-    p.add_argument("--lr", type=float, help=f"Adam learning rate")
-    p.add_argument("--betas", type=float, nargs=2, metavar=("B1", "B2"), help=f"Adam betas")
+    p.add_argument("--steps", type=int, help="total updates to reach")
+    p.add_argument("--size", type=int, help="image size S, a multiple of 16")
+    p.add_argument("--batch", type=int, help="batch size")
+    p.add_argument("--lr", type=float, help="Adam learning rate")
+    p.add_argument("--betas", type=float, nargs=2, metavar=("B1", "B2"), help="Adam betas")
     p.add_argument("--seed", type=int, help="seed of weights, data order, augmentation and noise")
     p.add_argument("--checkpoint-every", type=int, metavar="N",
-                   help=f"steps between checkpoints; also best.pt's interval")
+                   help="steps between checkpoints; also best.pt's interval")
     p.add_argument("--resume", action="store_true", help="continue RUN from checkpoints/last.pt")
     add_device(p)
     add_threads(p)
 
 
 def _add_gan(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--n-critic", type=int, help=f"critic updates per generator update")
-    p.add_argument("--gp-weight", type=float, help=f"λ of the gradient penalty")
+    p.add_argument("--n-critic", type=int, help="critic updates per generator update")
+    p.add_argument("--critic-lr", type=float, help="the critic's Adam rate (None: --lr)")
+    p.add_argument("--regulariser", choices=("gp", "r1"),
+                   help="gp: Wasserstein loss + gradient penalty; r1: logistic loss + R1 on reals (StyleGAN2)")
+    p.add_argument("--gp-weight", type=float, help="λ of the gradient penalty")
+    p.add_argument("--r1-gamma", type=float, help="γ of R1")
+    p.add_argument("--augment", action="store_true",
+                   help="show the critic real and fake through the same differentiable augmentation (translation, "
+                        "cutout, brightness/contrast, up-down flip; never left-right) (default off)")
     p.add_argument("--net", choices=NETS, help="network sizes: small (CPU) or paper (256², GPU) (default small)")
 
 
@@ -78,8 +85,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("--renders", required=True, metavar="DIR", help="a render set (or a folder of renders)")
     p.add_argument("--phi", required=True, metavar="RUN_AE", help="a trained autoencoder run")
     _add_gan(p)
-    p.add_argument("--phi-weight", type=float, help=f"weight of the φ loss")
-    p.add_argument("--phi-margin", type=float, help=f"γ: free relative φ change")
+    p.add_argument("--phi-weight", type=float, help="weight of the φ loss")
+    p.add_argument("--phi-margin", type=float, help="γ: free relative φ change")
+    p.add_argument("--ema", type=float, help="decay of the generator moving average that translates; 0: none")
+    p.add_argument("--mask-weight", type=float,
+                   help="weight of the mask contrast term (keeps shadows dark, highlights bright; needs masks/)")
+    p.add_argument("--mask-keep", type=float, help="fraction of a render's shadow/highlight contrast to keep")
 
     p = add_kind("dcgan", "unconditional baseline: z → image, same objective")
     _add_common(p)
@@ -99,6 +110,10 @@ def run(args: argparse.Namespace) -> int:
     overrides = {k: getattr(args, k) for k in TRAINING_FLAGS if getattr(args, k, None) is not None}
     if "betas" in overrides:
         overrides["betas"] = tuple(overrides["betas"])
+    if getattr(args, "augment", False):
+        from gan.augment import AugmentConfig
+
+        overrides["augment"] = AugmentConfig.recommended()
     if getattr(args, "net", None):
         overrides["critic"] = CRITIC_NETS[args.net]
         overrides |= {"generator": GENERATOR_NETS[args.net]} if kind is SASGAN else {"dcgan": DCGAN_NETS[args.net]}

@@ -1,0 +1,207 @@
+"""The small-data recipe: each option does what it says, and a test fails if it is ignored."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from gan.augment import AugmentConfig, augment
+from gan.autoencoder import AutoencoderConfig
+from gan.critic import Critic, CriticConfig
+from gan.data import ImageSet
+from gan.generator import GeneratorConfig, load_generator
+from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from gan.kinds.common import GanRun, Noise, critic_phase, critic_view
+from gan.kinds.sasgan import SASGAN, SasganRun
+from gan.loop import train
+from gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty
+from sasmi.errors import SasmiError
+from sasmi.images import write_gray
+from test_gan_train import make_render_set
+
+CPU = torch.device("cpu")
+SIZE = 32
+
+
+# ---------------------------------------------------------------- augmentation
+
+def _ramp(batch: int = 16) -> torch.Tensor:
+    """(B, 1, S, S): brightness grows along x (range), a bright band at the top (along-track y = 0)."""
+    x = torch.linspace(-0.8, 0.8, SIZE).expand(batch, 1, SIZE, SIZE).clone()
+    x[:, :, :3] += 0.1
+    return x
+
+
+def test_augment_never_flips_range_but_does_flip_along_track():
+    x = _ramp()
+    y = augment(x, AugmentConfig(brightness=0.25, contrast=0.3, vflip=True), torch.Generator().manual_seed(0))
+    assert (y.mean(dim=(1, 2)).diff(dim=1) > 0).all()  # every image still brightens with range
+    top_band = y[:, 0, :3].mean(dim=(1, 2)) > y[:, 0, 3:6].mean(dim=(1, 2))
+    assert 0 < top_band.sum() < len(x)  # some flipped up-down, some not
+    assert not torch.equal(y, x)
+
+
+def test_augment_is_differentiable_and_translates_and_cuts_out():
+    x = _ramp(4).requires_grad_(True)
+    y = augment(x, AugmentConfig(translation=0.125, cutout=0.5), torch.Generator().manual_seed(0))
+    assert y.shape == x.shape
+    assert all((image == 0).sum() >= 16 * 16 for image in y.detach())  # a 16 px square blanked in each
+    y.square().sum().backward()
+    assert x.grad.abs().sum() > 0
+    assert augment(x, AugmentConfig(), torch.Generator()) is x  # all off: the identity
+
+
+# ---------------------------------------------------------------- a SAS GAN on toy data
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("recipe")
+    rng = np.random.default_rng(0)
+    for i in range(8):
+        write_gray(root / "real" / f"{i}.png", np.clip(rng.gamma(2.0, 0.25, (SIZE, SIZE)), 0, 1))
+    renders = make_render_set(root / "renders", n=8, size=SIZE)
+    ae_cfg = AutoencoderRun(steps=10, size=SIZE, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
+                            sample_every=100, checkpoint_every=100)
+    phi = train(AUTOENCODER, ae_cfg, root / "ae", {"real": root / "real"}, CPU).out
+    return {"real": root / "real", "renders": renders, "phi": phi}
+
+
+TOY = SasganRun(size=SIZE, batch=4, n_critic=1, generator=GeneratorConfig(4, 1), critic=CriticConfig(4))
+
+
+def _phases(data, **overrides):
+    cfg = replace(TOY, **overrides)
+    torch.manual_seed(cfg.seed)
+    return SASGAN.build(cfg.validate(), data, CPU)
+
+
+def test_the_critic_sees_real_and_fake_through_the_augmentation(data):
+    phases = _phases(data, augment=AugmentConfig(cutout=0.5))
+    seen = []
+    phases.state["critic"].register_forward_pre_hook(lambda module, args: seen.append(args[0].detach()))
+    phases.critic_step()  # calls: real, fake, then the GP interpolates
+    phases.generator_step()  # calls: fake
+    for batch in (seen[0], seen[1], seen[-1]):
+        assert all((image == 0).sum() >= 16 * 16 for image in batch)  # a blanked square in every image
+
+
+def test_generator_moving_average_is_kept_and_translates(tmp_path, data):
+    cfg = replace(TOY, steps=3, ema=0.5, sample_every=100, checkpoint_every=100)
+    torch.manual_seed(cfg.seed)
+    phases = SASGAN.build(cfg, data, CPU)
+    generator, average = phases.state["generator"], phases.state["generator_ema"]
+    snapshots = []
+    for _ in range(3):
+        phases.critic_step()
+        phases.generator_step()
+        snapshots.append([p.detach().clone() for p in generator.parameters()])
+    expected = snapshots[0]  # the first update copies; then decay min(0.5, (1 + n)/(10 + n)), n = 1, 2
+    for n, weights in ((1, snapshots[1]), (2, snapshots[2])):
+        beta = min(0.5, (1 + n) / (10 + n))
+        expected = [e + (w - e) * (1 - beta) for e, w in zip(expected, weights)]
+    for e, p in zip(expected, average.module.parameters()):
+        torch.testing.assert_close(p, e)
+
+    out = train(SASGAN, cfg, tmp_path / "run", data, CPU).out  # the same 3 steps through the loop
+    loaded = load_generator(out)
+    for e, p in zip(expected, loaded.parameters()):
+        torch.testing.assert_close(p, e)  # translation uses the average, not the last weights
+    assert not all(torch.equal(p, q) for p, q in zip(loaded.parameters(), generator.parameters()))
+
+
+def test_critic_learning_rate_and_ratio_are_options(data):
+    phases = _phases(data, lr=2e-3, critic_lr=3e-4, n_critic=3)
+    assert phases.state["opt_g"].param_groups[0]["lr"] == 2e-3
+    assert phases.state["opt_c"].param_groups[0]["lr"] == 3e-4
+    assert phases.critic_steps == 3
+
+
+# ---------------------------------------------------------------- R1
+
+def test_r1_penalty_of_a_linear_critic_is_its_squared_norm():
+    w = torch.randn(1, 1, 8, 8)
+    real = torch.randn(3, 1, 8, 8)
+    assert torch.isclose(r1_penalty(lambda x: (x * w).sum(dim=(1, 2, 3)), real), w.square().sum())
+
+
+def _toy_critic(**overrides):
+    torch.manual_seed(0)
+    rng = torch.Generator().manual_seed(1)
+
+    def stream(mean):
+        return lambda: (mean + 0.2 * torch.randn(8, 1, SIZE, SIZE, generator=rng)).clamp(-1, 1)
+
+    critic = Critic(CriticConfig(4), SIZE)
+    cfg = replace(GanRun(size=SIZE), **overrides)
+    step = critic_phase(cfg, critic, torch.optim.Adam(critic.parameters(), lr=1e-3, betas=(0.5, 0.9)),
+                        stream(0.3), stream(-0.3), critic_view(cfg, Noise(2)), Noise(0), CPU)
+    for _ in range(40):
+        logs = step()
+    real = stream(0.3)().requires_grad_(True)
+    critic.requires_grad_(True)
+    (grad,) = torch.autograd.grad(critic(real).sum(), real)
+    return logs, grad.flatten(1).norm(dim=1).mean().item()
+
+
+def test_r1_regulariser_trains_a_logistic_critic_with_flat_gradients_at_the_reals():
+    logs, with_r1 = _toy_critic(regulariser="r1", r1_gamma=10.0)
+    assert "loss/r1" in logs and logs["loss/wasserstein"] > 0  # real scores above fake ones
+    _, without = _toy_critic(regulariser="r1", r1_gamma=0.0)
+    assert with_r1 < 0.5 * without, (with_r1, without)
+
+
+# ---------------------------------------------------------------- the mask contrast term
+
+def test_mask_contrast_gradient_darkens_shadows_and_brightens_highlights():
+    masks = torch.zeros(1, 1, SIZE, SIZE, dtype=torch.uint8)
+    masks[..., 10:14, 10:14], masks[..., 10:14, 16:24] = 1, 2  # a target, its shadow to its right
+    render = torch.full((1, 1, SIZE, SIZE), -0.3)
+    render[masks == 1], render[masks == 2] = 0.8, -0.9
+    flat = torch.full_like(render, -0.3).requires_grad_(True)  # a translation that erased both
+    loss = mask_contrast_loss(flat, render, masks, keep=0.5, ring=4)
+    assert loss > 0
+    loss.backward()
+    g = flat.grad  # gradient descent moves along −g
+    assert (g[masks == 2] > 0).all() and (g[masks == 1] < 0).all()  # shadow down, highlight up
+    near_floor = g[(masks == 0) & (g != 0)]
+    assert len(near_floor) and (near_floor.sum() != 0)
+    assert mask_contrast_loss(render, render, masks, keep=0.5, ring=4) == 0  # the render keeps its own contrast
+
+
+def _shadow_contrast(phases, renders, masks) -> float:
+    with torch.no_grad():
+        shadow, _ = mask_contrasts(phases.state["generator"](renders), masks, ring=8)
+    return shadow.mean().item()
+
+
+def test_mask_loss_moves_shadows_the_right_way(data):
+    images = ImageSet(data["renders"], SIZE, masks=True)
+    renders, masks = images.center(list(range(8))), torch.stack(images.masks)  # 48 px renders scaled to 32
+    contrast = {}
+    for weight in (0.0, 100.0):
+        phases = _phases(data, mask_weight=weight, mask_keep=1.0, phi_weight=0.0)
+        for _ in range(15):
+            phases.generator_step()
+        contrast[weight] = _shadow_contrast(phases, renders, masks)
+    render_contrast = mask_contrasts(renders, masks, 8)[0].mean().item()
+    assert contrast[100.0] > contrast[0.0] + 0.1, contrast  # the term darkens shadows against their floor
+    assert contrast[100.0] > 0.3 * render_contrast, (contrast, render_contrast)
+
+
+def test_mask_loss_needs_masks(tmp_path, data):
+    with pytest.raises(SasmiError, match="no masks/"):
+        _phases({**data, "renders": data["real"]}, mask_weight=1.0)
+
+
+def test_recipe_flags_from_the_command_line(tmp_path, data):
+    from sasmi.cli import main
+
+    out = tmp_path / "run"
+    assert main(["train", "sasgan", "--real", str(data["real"]), "--renders", str(data["renders"]), "--phi",
+                 str(data["phi"]), "--out", str(out), "--size", "32", "--batch", "2", "--steps", "2", "--n-critic", "1",
+                 "--device", "cpu", "--augment", "--regulariser", "r1", "--r1-gamma", "0.5", "--critic-lr", "1e-4",
+                 "--ema", "0.9", "--mask-weight", "10", "--mask-keep", "0.7"]) == 0
+    config = torch.load(out / "checkpoints" / "last.pt", weights_only=True)["config"]
+    assert config["augment"] == AugmentConfig.recommended().__dict__
+    assert (config["regulariser"], config["r1_gamma"], config["critic_lr"], config["ema"], config["mask_weight"],
+            config["mask_keep"]) == ("r1", 0.5, 1e-4, 0.9, 10.0, 0.7)
