@@ -62,8 +62,6 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.eval.run import StderrLog, evaluate_folders
 
     sets = parse_sets(args.sets, args.real)
-    if not args.phi.is_dir():
-        raise SasmiError(f"--phi {args.phi}: not a folder (expected an autoencoder run)")
     if (args.preset is None) != (args.generator is None):
         raise SasmiError("--preset and --generator: pose sweeps need both (or neither)")
     if args.bootstrap < 2:

@@ -2,11 +2,13 @@
 
 One file per job, in pipeline order (clean-fid style: features, then metrics, then report):
 - features.py      images → (N, S, S) in [0, 1] → φ (N, D) float64
+- cache.py         the real set's φ kept on disk between evaluations
 - metrics.py       FID (± bootstrap, matched-size ratio), KID, precision/recall: pure numpy on (N, D)
 - neighbours.py    nearest neighbours and the copying detector
 - preservation.py  target preservation on labelled sets (masks + labels.jsonl)
 - sweeps.py        pose sweeps through a renderer and a generator
 - report.py        markdown, metrics.json and figures (text and plots only)
+- config.py        EvalConfig, PreservationConfig, SweepConfig
 - run.py           the whole evaluation as one call (what `sasmi evaluate` runs)
 
     from sasmi.eval import phi_fid
