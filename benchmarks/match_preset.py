@@ -1,0 +1,63 @@
+"""Match a preset to real chips: render it, then `sasmi stats` against the real folder with tolerances.
+
+Renders PRESET at --size (default 128) into --out (resumes: an existing set with the same
+job is reused), computes the mask-free image statistics of the real folder and of the
+renders, and prints the side-by-side table with ok/FAIL per statistic (the tolerances of
+docs/realism.md) and a summary line `pass=K/N`. Exit status 0 when every statistic passes.
+
+    .venv/bin/python benchmarks/match_preset.py scenes/cylinder_chip.toml --real SPLIT/train/targets \
+        --count 150 --out /tmp/match/cylinder [--also scenes/muscle_paper.toml=/tmp/match/muscle]
+
+Tune on train chips only and report on validation chips (`sasmi split`), so that the match
+is not a fit to the chips it is judged on.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def render(preset: Path, out: Path, count: int, size: int, spp: int, seed: int) -> Path:
+    from sasmi.dataset import RenderJob, render_set
+    from sasmi.scene import load_preset
+
+    return render_set(RenderJob(preset=load_preset(preset), out=out, count=count, seed=seed, size=size, spp=spp))
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("preset", type=Path)
+    p.add_argument("--real", type=Path, required=True, help="real chips to match (train targets when tuning)")
+    p.add_argument("--out", type=Path, required=True, help="render folder (reused when it exists)")
+    p.add_argument("--also", action="append", default=[], metavar="PRESET=DIR",
+                   help="another preset to render and show beside it (e.g. the preset before tuning)")
+    p.add_argument("--count", type=int, default=150)
+    p.add_argument("--size", type=int, default=128)
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--plot", type=Path, help="histograms of the statistics (PNG)")
+    args = p.parse_args(argv)
+
+    from sasmi.stats import chip_statistics
+    from sasmi.stats_report import TOLERANCES, check, plot, table
+
+    jobs = [(args.preset, args.out)] + [tuple(Path(x) for x in spec.split("=", 1)) for spec in args.also]
+    results = [chip_statistics(args.real, args.size)]
+    for preset, out in jobs:
+        render(preset, out, args.count, args.size, args.spp, args.seed)
+        results.append(chip_statistics(out, args.size))
+    print(table(results, with_check=True))
+    for (preset, _), r in zip(jobs, results[1:]):
+        ok = check(results[0], r)
+        print(f"preset={preset} pass={sum(ok.values())}/{len(TOLERANCES)} failed={','.join(k for k, v in ok.items() if not v) or '-'}")
+    if args.plot:
+        plot(results, args.plot)
+    return 0 if all(check(results[0], results[1]).values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
