@@ -597,3 +597,12 @@ def test_read_folder_skips_unusable_with_one_line_each(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     with pytest.raises(SasmiError, match="no image files"):
         read_folder(tmp_path / "empty")
+
+
+def test_docs_state_every_range():
+    """docs/errors.md lists every flag and preset field that has a stated range."""
+    from sasmi import limits
+
+    text = (REPO / "docs" / "errors.md").read_text()
+    missing = [name for name in [*limits.FLAGS, *limits.FIELDS] if f"`{name}`" not in text]
+    assert not missing, f"add to docs/errors.md: {missing}"
