@@ -20,7 +20,7 @@ from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Scene, Seafloor, Sonar, load_preset
 
 REPO = Path(__file__).resolve().parents[1]
-PRESETS = ("cylinder_chip", "target_field", "seafloor_only")
+PRESETS = ("cylinder_chip", "muscle_paper", "target_field", "seafloor_only")
 SIZE = 64
 
 needs_povray = pytest.mark.skipif(shutil.which(povray.POVRAY) is None, reason="povray not installed (make setup)")
@@ -33,7 +33,7 @@ def scene_of(preset: str, index: int = 0) -> Scene:
 # -- SDL and IO, no rendering -------------------------------------------------------------
 
 def test_sdl_carries_the_geometry_exactly():
-    scene = scene_of("cylinder_chip")
+    scene = scene_of("muscle_paper")
     g = build_geometry(scene, SIZE)
     sdl = povray.geometry_sdl(g)
     meshes = re.findall(r"vertex_vectors \{ (\d+),\n(.*?)\n  \}\n  face_indices \{ (\d+),\n(.*?)\n  \}", sdl, re.S)
@@ -142,8 +142,8 @@ def edited_povray_side(scene: Scene, edit) -> xc.Side:
 
 @pytest.fixture(scope="module")
 def cylinder(renderer) -> tuple[Scene, xc.Side]:
-    """cylinder_chip scene 0 with 8 emitters (a faster POV-Ray) and its Mitsuba side."""
-    scene = scene_of("cylinder_chip")
+    """muscle_paper scene 0 with 8 emitters (a faster POV-Ray) and its Mitsuba side."""
+    scene = scene_of("muscle_paper")
     scene = dataclasses.replace(scene, sonar=dataclasses.replace(scene.sonar, emitters=8))
     return scene, xc.mitsuba_side(scene, renderer)
 
@@ -194,7 +194,7 @@ def test_lights_without_inverse_square_falloff_fail(cylinder):
 @pytest.mark.slow
 def test_cli_writes_every_output(tmp_path, capsys):
     out = tmp_path / "xc"
-    code = main(["crosscheck", str(REPO / "scenes" / "cylinder_chip.toml"), "--out", str(out), "--size", "32",
+    code = main(["crosscheck", str(REPO / "scenes" / "muscle_paper.toml"), "--out", str(out), "--size", "32",
                  "--index", "1"])
     printed = capsys.readouterr().out
     metrics = json.loads((out / "metrics.json").read_text())

@@ -17,7 +17,7 @@ from sasmi.images import read_gray
 
 from conftest import REPO
 
-PRESET = str(REPO / "scenes" / "cylinder_chip.toml")
+PRESET = str(REPO / "scenes" / "muscle_paper.toml")
 
 
 def render_cmd(out, count, *extra):

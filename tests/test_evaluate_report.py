@@ -90,7 +90,8 @@ def test_report_from_a_trained_run(data, capsys):
     # without a terminal (no progress bars) each stage still says one line
     stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("sasmi evaluate: [")]
     assert [s.split(":")[0] for s in stages] == ["φ of real", "φ of renders", "φ of shifted", "φ of floor", "realism",
-                                                 "copying detector", "t-SNE", "target preservation", f"wrote {out}/report.md"]
+                                                 "copying detector", "t-SNE", "target preservation", "image statistics",
+                                                 f"wrote {out}/report.md"]
 
     m = json.loads((out / "metrics.json").read_text())
     assert list(m["realism"]) == ["real→real", "renders", "shifted", "floor"]
@@ -154,7 +155,7 @@ def test_bad_input_exits_2_with_one_line(data, capsys, case):
     elif case == "reserved":
         good["--set"] = f"real={data.floor}"
     elif case == "preset alone":
-        extra = ["--preset", "scenes/cylinder_chip.toml"]
+        extra = ["--preset", "scenes/muscle_paper.toml"]
     elif case == "phi not a folder":
         good["--phi"] = data.root / "nope"
     elif case == "phi not a run":
@@ -251,7 +252,7 @@ def test_pose_sweep_through_mitsuba_and_a_trained_generator(data, tmp_path):
     cfg = SasganRun(steps=1, size=32, batch=2, n_critic=1, generator=GeneratorConfig(4, 1),
                           critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)
     generator = train(SASGAN, cfg, tmp_path / "gan", {"real": data.real, "renders": data.renders, "phi": data.phi}, CPU).out
-    preset = Path(__file__).resolve().parents[1] / "scenes" / "cylinder_chip.toml"
+    preset = Path(__file__).resolve().parents[1] / "scenes" / "muscle_paper.toml"
     report = sweeps.pose_sweep_from_runs(preset, generator, tmp_path, sweeps.SweepConfig(steps=3, spp=4))
     sweep = report.metrics["pose_sweep"]
     assert len(sweep["translation"]) == 3 and len(sweep["rotation"]) == 3

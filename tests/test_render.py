@@ -35,7 +35,7 @@ def test_size_must_be_multiple_of_16():
 
 
 def test_same_scene_same_result(renderer64):
-    scene = load_preset(REPO / "scenes" / "cylinder_chip.toml").sample(0, 3)
+    scene = load_preset(REPO / "scenes" / "muscle_paper.toml").sample(0, 3)
     a = renderer64.render(scene)
     renderer64.render(load_preset(REPO / "scenes" / "seafloor_only.toml").sample(0, 1))  # something else between
     b = renderer64.render(scene)
@@ -131,7 +131,7 @@ def test_wrong_llvm_library_is_one_line(tmp_path):
 def test_next_scene_reuses_the_compiled_kernels():
     import drjit as dr
 
-    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    preset = load_preset(REPO / "scenes" / "muscle_paper.toml")
     renderer = Renderer(size=32, spp=4)
     renderer.render(preset.sample(1, 0))
     dr.kernel_history()  # drop what the first scene compiled
@@ -148,7 +148,7 @@ def test_two_workers_match_one(tmp_path, render_set):
     from sasmi.cli import main
 
     out = tmp_path / "two"
-    assert main(["render", str(REPO / "scenes" / "cylinder_chip.toml"), "--out", str(out), "--count", "4",
+    assert main(["render", str(REPO / "scenes" / "muscle_paper.toml"), "--out", str(out), "--count", "4",
                  "--size", "32", "--spp", "4", "--workers", "2"]) == 0
     from PIL import Image
 

@@ -64,7 +64,7 @@ def test_missing_and_broken_preset(tmp_path):
 
 
 def test_sampling_depends_only_on_seed_and_index():
-    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    preset = load_preset(REPO / "scenes" / "muscle_paper.toml")
     a = [preset.sample(3, i) for i in range(5)]
     assert preset.sample(3, 4) == a[4]  # scene 4 alone equals scene 4 after 0..3
     assert len({s.targets[0].yaw for s in a}) == 5  # distributions really vary
