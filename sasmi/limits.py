@@ -94,6 +94,7 @@ FLAGS: dict[str, Range] = {
     "--steps": Range(1, 10_000_000, "training and fitting steps; 10^7 is weeks of GPU time", int),
     "--lr": Range(1e-12, 1.0, "Adam learning rates above 1 diverge at once; 0 learns nothing"),
     "--betas": Range(0.0, 0.999999, "Adam's moment decays lie in [0, 1)"),
+    "--checkpoint-every": Range(1, 10_000_000, "steps between checkpoints; a kill loses at most this many", int),
     "--n-critic": Range(1, 100, "critic updates per generator update; WGAN-GP uses 5", int),
     "--phi-weight": Range(0.0, 1e6, "weight of the φ loss; the default is 100"),
     "--phi-margin": Range(0.0, 10.0, "free relative φ change; 10 means φ is not constrained at all"),

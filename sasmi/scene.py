@@ -147,8 +147,8 @@ def _check_mesh_file(path: Path, where: str) -> None:
     """A mesh must be a regular file of bounded size: trimesh would read /dev/zero for ever."""
     try:
         st = path.stat()
-    except OSError:
-        raise SasmiError(f"{where}: {path}: mesh file not found") from None
+    except (OSError, ValueError):  # ValueError: a NUL character in the path
+        raise SasmiError(f"{where}: {str(path)!r}: mesh file not found") from None
     if not stat.S_ISREG(st.st_mode):
         raise SasmiError(f"{where}: {path}: not a regular file (expected an OBJ, STL or PLY file)")
     if st.st_size > limits.MESH_MAX_BYTES:
