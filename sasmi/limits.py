@@ -117,7 +117,8 @@ def check_render_cost(size: int, spp: int, flags: str = "--size and --spp") -> N
 ANGLE = Range(-360.0, 360.0, "degrees; one turn either way reaches every direction")
 METRES = 1000.0  # no length in a chip scene needs more than a kilometre
 GENERIC = Range(-1e6, 1e6, "no preset quantity needs more; larger values overflow the float32 geometry")
-RELATIVE_LEVEL = Range(None, 1e3, "relative to the calibrated exposure; beyond 10^3 every pixel saturates")
+RELATIVE_LEVEL = Range(1e-6, 100.0, "a gray-level scale (1: flat albedo-1 sand at the chip centre is white); "
+                                    "below 1e-6 every pixel is black, above 100 white")
 
 FIELDS: dict[str, Range] = {
     "sonar.max_range": Range(None, 2000.0, "m; SAS ranges reach a few hundred metres, and the float32 ray "

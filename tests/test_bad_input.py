@@ -221,6 +221,10 @@ PRESETS = NON_FINITE + [
     ('[[targets]]\nshape = "mesh"\nmesh = "/dev/zero"\n', "/dev/zero"),
     ('[[targets]]\nshape = "mesh"\nmesh = "/tmp"\n', "targets[0].mesh"),
     ("[[targets]]\nx = 1e400\n", "targets[0].x"),
+    ("[seafloor]\nrocks = 1000\nrock_radius = 100.0\n", "seafloor"),  # rocks above the array: a black chip
+    ("[[targets]]\nlength = 100.0\nradius = 100.0\nburial = 99.0\n", "targets[0]"),  # a tower into the array
+    ("[post]\ngain = 1e-300\n", "post.gain"),  # a black chip
+    ("[sonar]\nintensity = 1000.0\n", "sonar.intensity"),  # a white chip
     ('[[targets]]\nshape = "mesh"\nmesh = "a\\u0000b.obj"\n', "targets[0].mesh"),
     ("[[targets]]\n" * 1025, "targets"),
 ]
