@@ -54,7 +54,7 @@ class Range:
             return f"{value!r} is not a finite number"
         if self.lo is not None and value < self.lo or self.hi is not None and value > self.hi:
             return f"{value!r} is out of range"
-        if self.kind is int and value % self.multiple:
+        if self.kind is int and isinstance(value, int) and value % self.multiple:
             return f"{value!r} is not a multiple of {self.multiple}"
         return None
 

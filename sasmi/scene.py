@@ -245,8 +245,12 @@ def _check_distribution(cls: type, name: str, dist: dict, where: str) -> None:
     else:
         if args[1] < 0:
             raise SasmiError(f"{where}.normal: std {args[1]} is negative")
-        _check_value(cls, name, args[0], f"{where}.normal mean")  # draws are checked again one by one
-        limits.field_range(_section(where), name).check(args[1], f"{where}.normal std")
+        # each draw is checked again; these bounds only stop draws that could never be in range
+        r = limits.field_range(_section(where), name)
+        r.check(args[0], f"{where}.normal mean")
+        if r.lo is not None and r.hi is not None and args[1] > r.hi - r.lo:
+            raise SasmiError(f"{where}.normal: std {args[1]:g} exceeds the whole allowed range "
+                             f"(allowed: {r.allowed()})")
 
 
 def _check_table(cls: type, table: Any, where: str, skip: tuple[str, ...] = ()) -> None:

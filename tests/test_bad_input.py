@@ -193,6 +193,8 @@ PRESETS = NON_FINITE + [
     ("[seafloor]\nalbedo = {uniform = [0.1, 0.2], normal = [0.1, 0.1]}\n", "seafloor.albedo"),
     ("[[targets]]\nyaw = {choice = [0.0, nan]}\n", "targets[0].yaw"),
     ("[sonar]\nemitters = {normal = [32, 1e12]}\n", "sonar.emitters"),
+    ("[[targets]]\nyaw = {normal = [0, 1e6]}\n", "targets[0].yaw"),
+    ("[[targets]]\nyaw = {normal = [1e6, 1]}\n", "targets[0].yaw"),
     # unknown keys
     ("[sonar]\nfoo = 1\n", "sonar.foo"),
     ("[sonr]\n", "sonr"),
