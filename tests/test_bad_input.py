@@ -315,6 +315,21 @@ def test_bad_generate_flag(tmp_path, capsys, inputs, flags, name):
                      *TINY, *flags], name, out)
 
 
+def test_a_bad_late_scene_fails_before_the_first_chip(tmp_path, capsys):
+    """Only some draws bury the target whole: every scene is drawn before anything is written."""
+    bad = preset(tmp_path, "[[targets]]\nradius = 0.3\nburial = {uniform = [0.0, 0.9]}\n")
+    out = tmp_path / "out"
+    refused(capsys, ["render", bad, "--out", out, "--count", "50", "--size", "16", "--spp", "1"], "burial", out)
+
+
+def test_render_into_a_foreign_folder(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep")
+    refused(capsys, ["render", CYLINDER, "--out", out, *TINY], str(out), None)
+    assert [p.name for p in out.iterdir()] == ["mine.txt"]
+
+
 def test_render_out_is_a_file(tmp_path, capsys, inputs):
     out = tmp_path / "out"
     out.write_text("keep me")
