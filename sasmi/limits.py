@@ -54,7 +54,7 @@ class Range:
             return f"{value!r} is not a finite number"
         if self.lo is not None and value < self.lo or self.hi is not None and value > self.hi:
             return f"{value!r} is out of range"
-        if self.kind is int and value % self.multiple:
+        if self.kind is int and isinstance(value, int) and value % self.multiple:
             return f"{value!r} is not a multiple of {self.multiple}"
         return None
 
@@ -94,6 +94,7 @@ FLAGS: dict[str, Range] = {
     "--steps": Range(1, 10_000_000, "training and fitting steps; 10^7 is weeks of GPU time", int),
     "--lr": Range(1e-12, 1.0, "Adam learning rates above 1 diverge at once; 0 learns nothing"),
     "--betas": Range(0.0, 0.999999, "Adam's moment decays lie in [0, 1)"),
+    "--checkpoint-every": Range(1, 10_000_000, "steps between checkpoints; a kill loses at most this many", int),
     "--n-critic": Range(1, 100, "critic updates per generator update; WGAN-GP uses 5", int),
     "--phi-weight": Range(0.0, 1e6, "weight of the φ loss; the default is 100"),
     "--phi-margin": Range(0.0, 10.0, "free relative φ change; 10 means φ is not constrained at all"),
@@ -116,7 +117,8 @@ def check_render_cost(size: int, spp: int, flags: str = "--size and --spp") -> N
 ANGLE = Range(-360.0, 360.0, "degrees; one turn either way reaches every direction")
 METRES = 1000.0  # no length in a chip scene needs more than a kilometre
 GENERIC = Range(-1e6, 1e6, "no preset quantity needs more; larger values overflow the float32 geometry")
-RELATIVE_LEVEL = Range(None, 1e3, "relative to the calibrated exposure; beyond 10^3 every pixel saturates")
+RELATIVE_LEVEL = Range(1e-6, 100.0, "a gray-level scale (1: flat albedo-1 sand at the chip centre is white); "
+                                    "below 1e-6 every pixel is black, above 100 white")
 
 FIELDS: dict[str, Range] = {
     "sonar.max_range": Range(None, 2000.0, "m; SAS ranges reach a few hundred metres, and the float32 ray "

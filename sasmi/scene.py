@@ -132,8 +132,17 @@ class Scene:
         if s.near_range + s.chip_size > s.max_range:
             raise SasmiError(f"sonar.near_range: chip far edge {s.near_range + s.chip_size:g} m exceeds "
                              f"sonar.max_range {s.max_range:g} m")
+        f = self.seafloor
+        relief = 4 * f.rms_height + f.ripple_amplitude + (1.4 * f.rock_radius if f.rocks else 0.0)
+        if relief >= s.altitude:  # the floor would hide the array: a black chip, not an error, otherwise
+            raise SasmiError(f"seafloor: relief up to {relief:g} m (4 rms_height + ripple_amplitude + 1.4 rock_radius) "
+                             f"reaches the array at altitude {s.altitude:g} m (sonar.max_range / 10)")
         half = s.chip_size / 2
         for i, t in enumerate(self.targets):
+            top = (target_height(t) or 0.0) - t.burial
+            if top >= s.altitude:
+                raise SasmiError(f"targets[{i}]: rises {top:g} m above the floor, to the array at altitude "
+                                 f"{s.altitude:g} m (sonar.max_range / 10)")
             if not (-half < t.x < half):
                 raise SasmiError(f"targets[{i}].x: {t.x:g} m lies outside the chip (allowed: -{half:g} < x < {half:g})")
             if not (-half < t.y < half):
@@ -155,8 +164,8 @@ def _check_mesh_file(path: Path, where: str) -> None:
     """A mesh must be a regular file of bounded size: trimesh would read /dev/zero for ever."""
     try:
         st = path.stat()
-    except OSError:
-        raise SasmiError(f"{where}: {path}: mesh file not found") from None
+    except (OSError, ValueError):  # ValueError: a NUL character in the path
+        raise SasmiError(f"{where}: {str(path)!r}: mesh file not found") from None
     if not stat.S_ISREG(st.st_mode):
         raise SasmiError(f"{where}: {path}: not a regular file (expected an OBJ, STL or PLY file)")
     if st.st_size > limits.MESH_MAX_BYTES:
@@ -244,8 +253,12 @@ def _check_distribution(cls: type, name: str, dist: dict, where: str) -> None:
     else:
         if args[1] < 0:
             raise SasmiError(f"{where}.normal: std {args[1]} is negative")
-        _check_value(cls, name, args[0], f"{where}.normal mean")  # draws are checked again one by one
-        limits.field_range(_section(where), name).check(args[1], f"{where}.normal std")
+        # each draw is checked again; these bounds only stop draws that could never be in range
+        r = limits.field_range(_section(where), name)
+        r.check(args[0], f"{where}.normal mean")
+        if r.lo is not None and r.hi is not None and args[1] > r.hi - r.lo:
+            raise SasmiError(f"{where}.normal: std {args[1]:g} exceeds the whole allowed range "
+                             f"(allowed: {r.allowed()})")
 
 
 def _check_table(cls: type, table: Any, where: str, skip: tuple[str, ...] = ()) -> None:

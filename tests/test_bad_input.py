@@ -88,7 +88,19 @@ def _checkpoint_bytes() -> dict[str, bytes]:
         "torch_code": code.getvalue(),
         "other_net": good.getvalue(),  # loads, but its weights fit no sasmi network
         "not_dict": pickle.dumps([1, 2, 3]),
+        "torch_list": _torch_bytes([1, 2, 3]),  # loads, but is not a checkpoint
+        "torch_no_state": _torch_bytes({"step": 1}),  # loads, lacks the weights
     }
+
+
+def _torch_bytes(obj) -> bytes:
+    import io
+
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
 
 
 def _run_folder(path: Path, kind: str, checkpoint: bytes) -> None:
@@ -181,6 +193,8 @@ PRESETS = NON_FINITE + [
     ("[seafloor]\nalbedo = {uniform = [0.1, 0.2], normal = [0.1, 0.1]}\n", "seafloor.albedo"),
     ("[[targets]]\nyaw = {choice = [0.0, nan]}\n", "targets[0].yaw"),
     ("[sonar]\nemitters = {normal = [32, 1e12]}\n", "sonar.emitters"),
+    ("[[targets]]\nyaw = {normal = [0, 1e6]}\n", "targets[0].yaw"),
+    ("[[targets]]\nyaw = {normal = [1e6, 1]}\n", "targets[0].yaw"),
     # unknown keys
     ("[sonar]\nfoo = 1\n", "sonar.foo"),
     ("[sonr]\n", "sonr"),
@@ -209,6 +223,12 @@ PRESETS = NON_FINITE + [
     ('[[targets]]\nshape = "mesh"\nmesh = "/dev/zero"\n', "/dev/zero"),
     ('[[targets]]\nshape = "mesh"\nmesh = "/tmp"\n', "targets[0].mesh"),
     ("[[targets]]\nx = 1e400\n", "targets[0].x"),
+    ("[seafloor]\nrocks = 1000\nrock_radius = 100.0\n", "seafloor"),  # rocks above the array: a black chip
+    ("[[targets]]\nlength = 100.0\nradius = 100.0\nburial = 99.0\n", "targets[0]"),  # a tower into the array
+    ("[post]\ngain = 1e-300\n", "post.gain"),  # a black chip
+    ("[sonar]\nintensity = 1000.0\n", "sonar.intensity"),  # a white chip
+    ('[[targets]]\nshape = "mesh"\nmesh = "a\\u0000b.obj"\n', "targets[0].mesh"),
+    ("[[targets]]\n" * 1025, "targets"),
 ]
 
 
@@ -293,6 +313,21 @@ def test_bad_generate_flag(tmp_path, capsys, inputs, flags, name):
     out = tmp_path / "out"
     refused(capsys, ["generate", CYLINDER, "--generator", inputs["root"] / "sasgan_empty", "--out", out,
                      *TINY, *flags], name, out)
+
+
+def test_a_bad_late_scene_fails_before_the_first_chip(tmp_path, capsys):
+    """Only some draws bury the target whole: every scene is drawn before anything is written."""
+    bad = preset(tmp_path, "[[targets]]\nradius = 0.3\nburial = {uniform = [0.0, 0.9]}\n")
+    out = tmp_path / "out"
+    refused(capsys, ["render", bad, "--out", out, "--count", "50", "--size", "16", "--spp", "1"], "burial", out)
+
+
+def test_render_into_a_foreign_folder(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep")
+    refused(capsys, ["render", CYLINDER, "--out", out, *TINY], str(out), None)
+    assert [p.name for p in out.iterdir()] == ["mine.txt"]
 
 
 def test_render_out_is_a_file(tmp_path, capsys, inputs):
@@ -385,7 +420,8 @@ def test_bad_train_folder(tmp_path, capsys, inputs, kind, folder):
 
 # ------------------------------------------------------------------------------------------ checkpoints
 
-CHECKPOINTS = ["empty", "truncated", "random", "pickle_code", "torch_code", "other_net", "not_dict"]
+CHECKPOINTS = ["empty", "truncated", "random", "pickle_code", "torch_code", "other_net", "not_dict", "torch_list",
+               "torch_no_state"]
 RUNS = CHECKPOINTS + ["no_checkpoint", "bad_config", "other_kind", "missing"]
 
 
@@ -606,3 +642,41 @@ def test_docs_state_every_range():
     text = (REPO / "docs" / "errors.md").read_text()
     missing = [name for name in [*limits.FLAGS, *limits.FIELDS] if f"`{name}`" not in text]
     assert not missing, f"add to docs/errors.md: {missing}"
+
+
+# ------------------------------------------------------------------------------------------ the types themselves
+
+def test_argparse_types_parse_check_and_keep_explicit_types(tmp_path):
+    import argparse
+
+    from sasmi.cli_types import apply_limits, creatable, finite_float, flag, int_range, positive_int
+
+    assert flag("--size")("32") == 32 and positive_int("3") == 3 and finite_float(0, 1)("0.5") == 0.5
+    for convert, text in [(flag("--size"), "40"), (positive_int, "0"), (finite_float(0, 1), "nan"),
+                          (finite_float(), "inf"), (int_range(0, 9, multiple=3), "4"), (flag("--seed"), "1e3")]:
+        with pytest.raises(argparse.ArgumentTypeError):
+            convert(text)
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--seed", type=int)
+    parser.add_argument("--count", type=int_range(5, 6))  # a command's own checked type wins
+    parser.add_argument("--out", type=Path)
+    apply_limits(parser)
+    args = parser.parse_args(["--seed", "7", "--count", "5", "--out", str(tmp_path / "a" / "b")])
+    assert args.seed == 7 and args.count == 5 and args.out == tmp_path / "a" / "b"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--seed", "-1"])
+    with pytest.raises(argparse.ArgumentTypeError, match="is a file"):
+        (tmp_path / "f").write_text("")
+        creatable(str(tmp_path / "f" / "x"))
+
+
+def test_range_messages_state_the_reason():
+    from sasmi.errors import SasmiError
+    from sasmi.limits import FIELDS, FLAGS, check_render_cost
+
+    with pytest.raises(SasmiError, match=r"sonar.emitters: 2000 is out of range \(allowed: <= 1024; render time"):
+        FIELDS["sonar.emitters"].check(2000, "sonar.emitters")
+    assert all(r.why for r in [*FLAGS.values(), *FIELDS.values()])
+    check_render_cost(256, 4096)
+    with pytest.raises(SasmiError, match="--size and --spp"):
+        check_render_cost(1024, 2048)

@@ -74,6 +74,12 @@ def test_sampling_depends_only_on_seed_and_index():
         assert 0.0 <= s.targets[0].burial <= 0.25
 
 
+def test_normal_over_an_integer_field_and_a_bounded_field_loads():
+    """Bounds on a normal's mean and std stop only draws that could never be in range."""
+    preset = Preset.from_dict({"sonar": {"emitters": {"normal": [32.5, 2.0]}, "chip_size": {"normal": [6.0, 0.05]}}})
+    assert all(isinstance(preset.sample(0, i).sonar.emitters, int) for i in range(5))
+
+
 def test_choice_and_integer_uniform():
     preset = Preset.from_dict({"seafloor": {"rocks": {"uniform": [0, 4]}},
                                "targets": [{"shape": {"choice": ["sphere", "cone"]}}]})
