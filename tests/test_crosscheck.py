@@ -20,7 +20,7 @@ from sasmi.mitsuba_render import Renderer
 from sasmi.scene import Scene, Seafloor, Sonar, load_preset
 
 REPO = Path(__file__).resolve().parents[1]
-PRESETS = ("cylinder_chip", "target_field", "seafloor_only")
+PRESETS = ("cylinder_chip", "muscle_paper", "target_field", "seafloor_only")
 SIZE = 64
 
 needs_povray = pytest.mark.skipif(shutil.which(povray.POVRAY) is None, reason="povray not installed (make setup)")
@@ -142,8 +142,8 @@ def edited_povray_side(scene: Scene, edit) -> xc.Side:
 
 @pytest.fixture(scope="module")
 def cylinder(renderer) -> tuple[Scene, xc.Side]:
-    """cylinder_chip scene 0 with 8 emitters (a faster POV-Ray) and its Mitsuba side."""
-    scene = scene_of("cylinder_chip")
+    """muscle_paper scene 0 (the 6 m chip these mutations were sized for) with 8 emitters and its Mitsuba side."""
+    scene = scene_of("muscle_paper")
     scene = dataclasses.replace(scene, sonar=dataclasses.replace(scene.sonar, emitters=8))
     return scene, xc.mitsuba_side(scene, renderer)
 
