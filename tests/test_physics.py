@@ -124,3 +124,27 @@ def test_lambert_squared_backscatter_sharpens_the_relief(renderer64):
     contrast = {law: chip(law, 0.02).std() / chip(law, 0.02).mean() for law in ("lambert", "lambert2")}
     assert contrast["lambert2"] > 1.25 * contrast["lambert"], contrast
     assert chip("lambert2", 0.0).mean() == pytest.approx(chip("lambert", 0.0).mean(), rel=0.02)
+
+
+def test_slant_range_lays_a_tall_target_over_the_floor_in_front(renderer64):
+    """sonar.slant_range: a 1.5 m cone under a steep (20 m altitude) array; its top is nearer in slant
+    range than its base, so its highlight moves to the leading (near-range) edge, where the slant
+    geometry puts it (measured: brightest pixels at column 5 against 32 in ground range); a flat floor
+    keeps its level."""
+    from sasmi.render.geometry import build_geometry
+    from sasmi.render.slant import slant_map
+
+    def scene(slant: bool, targets=(Target(shape="cone", x=0.0, length=1.5, radius=0.5, radius_top=0.3),)) -> Scene:
+        return flat_chip(sonar=Sonar(near_range=10.0, altitude=20.0, slant_range=slant), targets=targets)
+
+    def brightest_column(image: np.ndarray) -> float:
+        return float(np.unravel_index(np.argsort(image, axis=None)[-20:], image.shape)[1].mean())
+
+    ground, slant = renderer64.render(scene(False)), renderer64.render(scene(True))
+    top = float(slant_map(build_geometry(scene(True), 64), np.zeros((64, 64))).column(0.0, 1.5 * 2 / 6.0))
+    assert abs(brightest_column(ground.image) - 31.5) < 3
+    assert abs(brightest_column(slant.image) - top) < 3 and top < 15, (brightest_column(slant.image), top)
+    c0, _, c1, _ = slant.labels["targets"][0]["bbox"]
+    assert c0 <= brightest_column(slant.image) < c0 + 0.25 * (c1 - c0)  # the highlight leads the target
+    flat = {s: renderer64.render(scene(s, targets=())).image for s in (False, True)}
+    np.testing.assert_allclose(flat[True].mean(axis=0), flat[False].mean(axis=0), rtol=0.01)

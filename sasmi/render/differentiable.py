@@ -104,6 +104,9 @@ class DifferentiableRenderer:
         normalised to its rms), which is how a fitted roughness goes back into a preset.
         """
         s = scene.sonar
+        if s.slant_range:
+            raise SasmiError("sonar.slant_range: the differentiable render works in ground range; "
+                             "fit a preset with slant_range = false")
         unit = 2.0 / s.chip_size  # chip units per metre
         g = build_geometry(scene, self.size)
         relief = surface(dataclasses.replace(scene.seafloor, rocks=0), s.chip_size, scene.seed)

@@ -13,7 +13,7 @@ render kernel once per process and later images cost only the render itself.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -27,7 +27,8 @@ from sasmi.render.bsdf import register as register_bsdf
 from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.post import post_maps, postprocess
-from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, mi_mesh, shape_ids, visibility
+from sasmi.render.slant import labels_to_slant, slant_map, to_slant
+from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, mi_mesh, shape_ids, surface_heights, visibility
 from sasmi.scene import Scene
 
 
@@ -150,10 +151,24 @@ class Renderer:
         self.prepare(g)
         launched = self.launch(scene.seed)
         maps = post_maps(scene, g)  # numpy work while the render runs
-        image = postprocess(self.collect(launched), maps)
+        radiance = self.collect(launched)
         visible, owner = self.visibility(g)
-        return Rendered(image=image, mask=class_mask(visible, owner),
+        if scene.sonar.slant_range:
+            return self._render_slant(scene, g, radiance, maps, visible, owner)
+        return Rendered(image=postprocess(radiance, maps), mask=class_mask(visible, owner),
                         label=chip_label(scene, visible, owner, self.size))
+
+    def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner) -> Rendered:
+        """The chip with its x axis in slant range (sasmi.render.slant): gain before the move, speckle after."""
+        gain, speckle, offset = maps
+        m = slant_map(g, surface_heights(self.mi, self._scene, self.size))
+        image = postprocess(to_slant(radiance * gain, m), (np.ones_like(gain), speckle, offset))
+        visible, owner = labels_to_slant(visible, owner, m)
+        label = chip_label(scene, visible, owner, self.size)
+        unit = 2.0 / scene.sonar.chip_size
+        targets = tuple(replace(t, pixel_centre=(float(m.column(t.params["x"] * unit, 0.0)), t.pixel_centre[1]))
+                        for t in label.targets)
+        return Rendered(image=image, mask=class_mask(visible, owner), label=replace(label, targets=targets))
 
 
 @lru_cache(maxsize=4)

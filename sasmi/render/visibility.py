@@ -101,6 +101,19 @@ class Occluders:
         return index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64), self.ids)
 
 
+def camera_hits(mi, scene, n: int):
+    """Mitsuba SurfaceInteraction of the rays through the n x n pixel centres, straight down."""
+    centres = (np.arange(n) + 0.5) / n * 2 - 1
+    xs, ys = np.meshgrid(centres, centres)
+    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
+    return scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+
+
+def surface_heights(mi, scene, n: int) -> np.ndarray:
+    """(n, n) float64 height (chip units) of the surface seen through each pixel centre."""
+    return np.asarray(camera_hits(mi, scene, n).p.z, dtype=np.float64).reshape(n, n)
+
+
 def visibility(mi, dr, scene, target_ids: np.ndarray, occluders: Occluders, g: Geometry
                ) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) int64 each: index of the visible target (-1 none) and of the target shadowing the pixel (-1 none).
@@ -108,10 +121,7 @@ def visibility(mi, dr, scene, target_ids: np.ndarray, occluders: Occluders, g: G
     `scene` is the loaded Mitsuba scene of `g` (floor and targets), `target_ids` its targets' ids.
     """
     n = g.size
-    centres = (np.arange(n) + 0.5) / n * 2 - 1
-    xs, ys = np.meshgrid(centres, centres)
-    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
-    si = scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+    si = camera_hits(mi, scene, n)
     visible = index_of(np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64), target_ids)
 
     lifted = np.asarray(si.p + si.n * 1e-4, dtype=np.float32).reshape(3, -1).T  # (P, 3)
