@@ -107,6 +107,9 @@ class DifferentiableRenderer:
         if s.slant_range:
             raise SasmiError("sonar.slant_range: the differentiable render works in ground range; "
                              "fit a preset with slant_range = false")
+        if s.aperture_angle:
+            raise SasmiError("sonar.aperture_angle: the differentiable render models spots aimed at the chip "
+                             "centre; fit a preset with aperture_angle = 0")
         unit = 2.0 / s.chip_size  # chip units per metre
         g = build_geometry(scene, self.size)
         relief = surface(dataclasses.replace(scene.seafloor, rocks=0), s.chip_size, scene.seed)

@@ -73,8 +73,8 @@ def load_scene(mi, dr, g: Geometry, spp: int):
         d[name].set_bsdf(mi.load_dict(bsdf_dict(mesh.albedo, mesh.cos_power)))
     # One intensity texture shared by every spot: traverse lists it once, under emitter_0.
     intensity = mi.load_dict({"type": "uniform", "value": g.emitter_intensity})
-    for k, p in enumerate(g.emitter_positions):
-        d[f"emitter_{k}"] = {"type": "spot", "to_world": spot_to_world(mi, p, g.aim), "cutoff_angle": g.cone_angle,
+    for k, (p, aim) in enumerate(zip(g.emitter_positions, g.aims)):
+        d[f"emitter_{k}"] = {"type": "spot", "to_world": spot_to_world(mi, p, aim), "cutoff_angle": g.cone_angle,
                              "beam_width": g.beam_width, "intensity": intensity}
     return mi.load_dict(d)
 
@@ -110,8 +110,8 @@ class Renderer:
             p[f"target_{k}.vertex_positions"] = aligned(t.vertices)
             p[f"target_{k}.bsdf.reflectance.value"] = t.albedo
         self._occluders.update(g)
-        for k, pos in enumerate(g.emitter_positions):
-            p[f"emitter_{k}.to_world"] = spot_to_world(self.mi, pos, g.aim)
+        for k, (pos, aim) in enumerate(zip(g.emitter_positions, g.aims)):
+            p[f"emitter_{k}.to_world"] = spot_to_world(self.mi, pos, aim)
         p["emitter_0.intensity.value"] = g.emitter_intensity
         p.update()
 
