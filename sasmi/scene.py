@@ -56,6 +56,11 @@ class Sonar:
     cone_angle: float = _spec(30.0, lambda v: 0 < v < 90, "in (0, 90)", "deg; beam half-angle (cutoff)")
     intensity: float = _spec(1.0, _positive, "> 0", "source level, relative to the calibrated exposure")
     altitude: float = _spec(0.0, _nonneg, ">= 0", "m; height of the array above the seafloor; 0 = max_range / 10")
+    slant_range: bool = _spec(False, None, "true or false", "image x axis in slant range from the track "
+                              "(layover, foreshortening), as a sonar forms images; false: ground range")
+    aperture_angle: float = _spec(0.0, lambda v: 0 <= v < 90, "in [0, 90)",
+                                  "deg; > 0: beams look broadside with this along-track width, so the synthetic "
+                                  "aperture grows with range (track_length is then derived); 0: spots aim at the chip")
 
     @property
     def array_altitude(self) -> float:
