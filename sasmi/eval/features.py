@@ -15,6 +15,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
+from sasmi.eval import cache
 from sasmi.images import list_images
 
 
@@ -86,8 +87,6 @@ def image_paths(folder: str | os.PathLike) -> list[Path]:
 def load_set(name: str, folder: str | os.PathLike, encoder, batch: int = 32, cache_dir: str | os.PathLike | None = None,
              log: Callable[[str], None] = lambda message: None) -> FeatureSet:
     """Images and φ of a folder; φ is read from (or written to) `cache_dir` when one is given."""
-    from sasmi.eval import cache
-
     paths = image_paths(folder)
     cached = cache.cache_file(cache_dir, folder, paths, encoder) if cache_dir is not None else None
     phi = cache.read(cached, len(paths)) if cached is not None and cached.is_file() else None

@@ -118,6 +118,6 @@ def copying_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfi
                            for space in ("pixel", "phi")}
         shown = np.sort(rng.choice(len(s.images), min(cfg.neighbours_shown, len(s.images)), replace=False))
         neighbour_grid(s, real, shown, (pix_idx, pix_d / pixel_scale), (phi_idx, phi_d),
-                        out_dir / f"neighbours_{s.name}.png")
+                       out_dir / f"neighbours_{s.name}.png")
     distance_histograms(real_nn, generated_nn, out_dir / "nearest_distances.png")
     return metrics
