@@ -34,11 +34,34 @@ class Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from sasmi import __version__
+
     parser = Parser(prog="sasmi", description="Artificial SAS images: render, learn realism, evaluate.")
+    parser.add_argument("--version", action="version", version=f"sasmi {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in COMMANDS:
         command.add_parser(sub)
-    return apply_limits(parser)
+    return show_defaults(apply_limits(parser))
+
+
+def _subparsers(parser: argparse.ArgumentParser):
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                yield from _subparsers(child)
+
+
+def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Every --help names each flag's default, whichever command defined the flag and however."""
+    for p in _subparsers(parser):
+        for action in p._actions:
+            if action.help in (None, argparse.SUPPRESS) or "%(default)" in action.help or "default" in action.help:
+                continue
+            if action.default in (None, argparse.SUPPRESS, False) or action.option_strings == []:
+                continue
+            action.help += " (default: %(default)s)"
+    return parser
 
 
 def check_flag_combinations(args: argparse.Namespace) -> None:
