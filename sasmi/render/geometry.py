@@ -127,11 +127,12 @@ def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     return v, np.asarray(f, dtype=np.uint32)
 
 
-def check_targets(scene: Scene) -> None:
-    """Load every mesh-file target and check its burial, so bad files fail before a run writes anything.
-
-    Built-in shapes need no load: Scene.validate already knows their height.
-    """
+def check_scene(scene: Scene) -> None:
+    """What Scene.validate cannot check, so a bad preset fails before a run writes anything: every
+    mesh-file target loads and is not buried whole (built-in shapes need no load: Scene.validate
+    knows their height), and broadside beams cover the chip in elevation."""
+    if scene.sonar.aperture_angle:
+        check_elevation_coverage(scene.sonar, 0.75 * scene.sonar.aperture_angle / 2)
     for i, t in enumerate(scene.targets):
         if t.shape == "mesh":
             _checked_shape(t, f"targets[{i}]")
