@@ -1,6 +1,6 @@
 """Render speed and memory: ms/image at 256², 32 emitters, 16 spp (labels and PNG writing
-included), median over >= 20 images after warm-up; and peak RSS of `sasmi render` for
---count 10 vs --count 1000 (memory must stay flat in the count).
+included), median over >= 20 images after warm-up, wall and CPU time (all threads); and peak
+RSS of `sasmi render` for --count 10 vs --count 1000 (memory must stay flat in the count).
 
     .venv/bin/python benchmarks/render.py [--images 24] [--rss-counts 10 1000] [--rss-size 256]
 """
@@ -28,21 +28,23 @@ sys.exit(code)
 """
 
 
-def per_image_ms(images: int, warmup: int, size: int, spp: int) -> list[float]:
+def per_image_ms(images: int, warmup: int, size: int, spp: int) -> tuple[list[float], list[float]]:
+    """Wall and CPU (all threads) milliseconds per image; CPU time is steadier on a shared machine."""
     from sasmi.dataset import write_one
     from sasmi.render.mitsuba import Renderer
     from sasmi.scene import load_preset
 
     preset = load_preset(PRESET)
     renderer = Renderer(size=size, spp=spp)
-    times = []
+    times, cpu = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(warmup + images):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             rendered = renderer.render(preset.sample(0, i))
             write_one(Path(tmp), i, rendered.image, rendered, "png")
             times.append((time.perf_counter() - start) * 1000)
-    return times[warmup:]
+            cpu.append((time.process_time() - start_cpu) * 1000)
+    return times[warmup:], cpu[warmup:]
 
 
 def peak_rss_mb(count: int, size: int) -> tuple[float, float]:
@@ -67,10 +69,11 @@ def main() -> None:
     args = ap.parse_args()
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
-    times = per_image_ms(args.images, args.warmup, args.size, args.spp)
+    times, cpu = per_image_ms(args.images, args.warmup, args.size, args.spp)
     q = statistics.quantiles(times, n=10)
     print(f"render {args.size}x{args.size}, 32 emitters, {args.spp} spp, labels + PNG: "
-          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}; {len(times)} images)")
+          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}; {len(times)} images); "
+          f"CPU {statistics.median(cpu):.0f} ms/image")
     for count in args.rss_counts:
         rss, seconds = peak_rss_mb(count, args.rss_size)
         print(f"sasmi render --count {count} --size {args.rss_size}: peak RSS {rss:.0f} MB, "

@@ -148,11 +148,11 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     written; masks and labels are the render's. `identity` joins the run record, so a
     resumed run must use the same transform (e.g. the same generator checkpoint).
     """
-    from sasmi.render.geometry import check_targets
+    from sasmi.render.geometry import check_scene
 
     job = job.validate()
     for index in range(job.count):  # every scene is drawn and checked before anything is written
-        check_targets(job.preset.sample(job.seed, index))
+        check_scene(job.preset.sample(job.seed, index))
     _check_run_record(job, identity or {})
     for stale in job.out.glob("*/.*.tmp*"):  # temp files of a killed run; their targets were never renamed
         stale.unlink()

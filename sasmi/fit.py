@@ -2,17 +2,15 @@
 
 The loop renders K scenes of a preset with the current parameters, encodes them with the
 GAN's φ encoder and pulls the mean φ of the renders towards the mean φ of the real chips;
-the gradient reaches the parameters through `DifferentiableRenderer` (Dr.Jit's AD, wrapped
-as a torch function; central differences of the image for roughness and elevation, which
-move shadow edges that AD does not see). What moves is a scale factor per parameter, 1 = the preset as
-written, so a preset whose fields are distributions keeps its spread and the fitted preset
-scales each field (docs/differentiable.md):
+the gradient reaches the parameters through `DifferentiableRenderer` (AD; central
+differences of the image for roughness and elevation, which move shadow edges). What moves
+is a scale factor per parameter, 1 = the preset, so a preset whose fields are distributions
+keeps its spread and the fitted preset scales each field (docs/differentiable.md):
 
     seafloor.roughness  rough + ripple relief        → seafloor.rms_height, seafloor.ripple_amplitude
     seafloor.albedo     floor reflectance (≤ 1)      → seafloor.albedo
     sonar.intensity     source level                 → sonar.intensity
-    sonar.elevation     altitude of the array        → sonar.altitude if the preset sets it, else
-                                                       sonar.max_range (altitude = max_range / 10)
+    sonar.elevation     altitude of the array        → sonar.altitude if set, else sonar.max_range
 
 Adam works on the logarithm of the scales, so every parameter moves by a similar relative
 step and stays positive. The loss is `gan.losses.phi_loss` with margin 0: the distance
@@ -147,17 +145,13 @@ def scaled_preset(preset: Preset, scales: dict[str, float]) -> dict:
 
 
 def scale_bounds(scenes: Sequence[Scene], params: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(P,) lowest and highest scale per parameter that keeps every fitted scene valid.
-
-    Albedo may not pass 1; an array whose altitude is max_range / 10 (no sonar.altitude set)
-    may not sink below max_range = near_range + chip_size (the chip must lie within range).
-    """
+    """(P,) lowest and highest scale per parameter that keeps every fitted scene valid (albedo <= 1)."""
     low = np.full(len(params), 1.0 / SCALE_LIMIT)
     high = np.full(len(params), SCALE_LIMIT)
     for i, name in enumerate(params):
         if name == "seafloor.albedo":
             high[i] = min(SCALE_LIMIT, 1.0 / max(s.seafloor.albedo for s in scenes))
-        if name == "sonar.elevation":
+        if name == "sonar.elevation":  # an altitude of max_range / 10: the chip must stay within range
             low[i] = max([(s.sonar.near_range + s.sonar.chip_size) / s.sonar.max_range
                           for s in scenes if not s.sonar.altitude] + [1.0 / SCALE_LIMIT])
     return low, high

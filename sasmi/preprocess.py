@@ -10,12 +10,14 @@ Training, translation, evaluation and the datasets all call `fit_image` (or
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from sasmi.errors import SasmiError
+
+if TYPE_CHECKING:  # torch is imported where a tensor is made: `sasmi render` needs none (and 180 MB less)
+    import torch
 from sasmi.images import read_gray
 
 SIZE_MULTIPLE = 16  # four stride-2 stages in the critic, the autoencoder and the U-Net
@@ -41,6 +43,9 @@ def signed_to_unit(x: torch.Tensor) -> torch.Tensor:
 
 def resize_short_side(image01: np.ndarray, size: int) -> torch.Tensor:
     """(H, W) in [0, 1] -> (1, h, w) in [0, 1] with min(h, w) == size; antialiased when shrinking."""
+    import torch
+    import torch.nn.functional as F
+
     h, w = image01.shape
     scale = size / min(h, w)
     shape = (max(size, round(h * scale)), max(size, round(w * scale)))
@@ -52,6 +57,8 @@ def resize_short_side(image01: np.ndarray, size: int) -> torch.Tensor:
 
 def resize(x01: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
     """(B, C, h, w) in [0, 1] -> (B, C, *shape) in [0, 1]; the identity when the shape matches."""
+    import torch.nn.functional as F
+
     if tuple(x01.shape[-2:]) == tuple(shape):
         return x01
     return F.interpolate(x01, size=tuple(shape), mode="bilinear", antialias=True, align_corners=False).clamp(0, 1)
@@ -80,6 +87,8 @@ def load_image(path: str | os.PathLike, size: int) -> np.ndarray:
 
 def to_batch(images01: np.ndarray, device: torch.device | str = "cpu") -> torch.Tensor:
     """(N, S, S) in [0, 1] (numpy) -> (N, 1, S, S) in [-1, 1] on `device`: what networks take."""
+    import torch
+
     if images01.ndim != 3:
         raise ValueError(f"expected (N, H, W) images, got shape {images01.shape}")
     x = torch.from_numpy(np.ascontiguousarray(images01, dtype=np.float32))[:, None]

@@ -20,7 +20,7 @@ from sasmi.render.mitsuba import Renderer
 from sasmi.scene import Scene, Seafloor, Sonar, load_preset
 
 REPO = Path(__file__).resolve().parents[1]
-PRESETS = ("cylinder_chip", "muscle_paper", "target_field", "seafloor_only")
+PRESETS = ("cylinder_chip", "muscle_paper", "target_field", "seafloor_only", "sas_physics")
 SIZE = 64
 
 needs_povray = pytest.mark.skipif(shutil.which(povray.POVRAY) is None, reason="povray not installed (make setup)")

@@ -192,3 +192,15 @@ def test_aperture_keeps_a_flat_floor_even_and_darkens_shadows(renderer64):
     sphere = (Target(shape="sphere", x=-1.5, radius=0.3),)
     shadow = {a: (renderer64.render(scene(a, sphere)).mask == MASK_SHADOW).sum() for a in (0.0, 6.0)}
     assert shadow[6.0] > 1.25 * shadow[0.0], shadow
+
+
+def test_too_narrow_aperture_fails_before_anything_is_written(tmp_path, capsys):
+    from sasmi.cli import main
+
+    preset = tmp_path / "narrow.toml"
+    preset.write_text("[sonar]\naperture_angle = 2.0\n")
+    out = tmp_path / "out"
+    assert main(["render", str(preset), "--out", str(out), "--count", "1", "--size", "32"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "sonar.aperture_angle: 2 deg" in err and "allowed: >=" in err
+    assert not out.exists()

@@ -127,11 +127,12 @@ def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     return v, np.asarray(f, dtype=np.uint32)
 
 
-def check_targets(scene: Scene) -> None:
-    """Load every mesh-file target and check its burial, so bad files fail before a run writes anything.
-
-    Built-in shapes need no load: Scene.validate already knows their height.
-    """
+def check_scene(scene: Scene) -> None:
+    """What Scene.validate cannot check, so a bad preset fails before a run writes anything: every
+    mesh-file target loads and is not buried whole (built-in shapes need no load: Scene.validate
+    knows their height), and broadside beams cover the chip in elevation."""
+    if scene.sonar.aperture_angle:
+        check_elevation_coverage(scene.sonar, 0.75 * scene.sonar.aperture_angle / 2)
     for i, t in enumerate(scene.targets):
         if t.shape == "mesh":
             _checked_shape(t, f"targets[{i}]")
@@ -181,8 +182,12 @@ def beam_falloff(positions: np.ndarray, aims: np.ndarray, points: np.ndarray, cu
     axis = aims - positions
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
     to_point = points[None, :, :] - positions[:, None, :]  # (N, P, 3)
-    cos = np.einsum("npk,nk->np", to_point, axis) / np.linalg.norm(to_point, axis=2)
-    angle = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+    return spot_profile(np.einsum("npk,nk->np", to_point, axis) / np.linalg.norm(to_point, axis=2), cutoff, beam_width)
+
+
+def spot_profile(cos_off_axis: np.ndarray, cutoff: float, beam_width: float) -> np.ndarray:
+    """Mitsuba's spot falloff from the cosine of the angle off the beam axis (angles in deg)."""
+    angle = np.degrees(np.arccos(np.clip(cos_off_axis, -1, 1)))
     return np.clip((cutoff - angle) / (cutoff - beam_width), 0.0, 1.0)
 
 
@@ -204,16 +209,16 @@ def flat_floor_irradiance(positions: np.ndarray, size: int, cos_power: int = 1, 
                           ) -> np.ndarray:
     """(size, size) sum of [profile x] cos(theta)^cos_power / d^2 over the emitters, flat floor at pixel centres."""
     centres = (np.arange(size) + 0.5) / size * 2 - 1
-    if beam is not None:
-        x, y = np.meshgrid(centres, centres)
-        points = np.stack([x.ravel(), y.ravel(), np.zeros(size * size)], 1)
-        weights = beam_falloff(positions, beam[0], points, *beam[1:]).reshape(len(positions), size, size)
     total = np.zeros((size, size))
     for k, (px, py, pz) in enumerate(positions):
         d2 = ((px - centres) ** 2)[None, :] + ((py - centres) ** 2 + pz**2)[:, None]  # (rows = y, cols = x)
         cos_theta = pz / np.sqrt(d2)
         part = (cos_theta if cos_power == 1 else cos_theta**cos_power) / d2
-        total += part if beam is None else weights[k] * part
+        if beam is not None:  # the same as beam_falloff, one emitter at a time on the pixel grid
+            ax, ay, az = (beam[0][k] - positions[k]) / np.linalg.norm(beam[0][k] - positions[k])
+            along = (ax * (centres - px))[None, :] + (ay * (centres - py) - az * pz)[:, None]
+            part *= spot_profile(along / np.sqrt(d2), beam[1], beam[2])
+        total += part
     return total
 
 
