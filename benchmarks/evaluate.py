@@ -30,9 +30,9 @@ def one(n: int, bootstrap: int, image_size: int, dim: int) -> None:
     from sasmi.eval.run import evaluate
 
     rng = np.random.default_rng(0)
-    real = FeatureSet("real", Path("real"), rng.uniform(0, 1, (n, image_size, image_size)).astype(np.float32),
+    real = FeatureSet("real", Path("real"), rng.random((n, image_size, image_size), dtype=np.float32),
                       rng.standard_normal((n, dim)))
-    fake = FeatureSet("fake", Path("fake"), rng.uniform(0, 1, (n, image_size, image_size)).astype(np.float32),
+    fake = FeatureSet("fake", Path("fake"), rng.random((n, image_size, image_size), dtype=np.float32),
                       rng.standard_normal((n, dim)) + 0.02)
     inputs_mb = (real.phi.nbytes + fake.phi.nbytes + real.images.nbytes + fake.images.nbytes) / 2**20
     start = time.perf_counter()

@@ -28,6 +28,28 @@ def render(preset: Path, out: Path, count: int, size: int, spp: int, seed: int) 
     return render_set(RenderJob(preset=load_preset(preset), out=out, count=count, seed=seed, size=size, spp=spp))
 
 
+def side_by_side(folders: list[Path], names: list[str], path: Path, size: int, columns: int) -> None:
+    """One row of the first `columns` chips of each folder, labelled on the left."""
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from sasmi.images import atomic_path, list_images
+    from sasmi.preprocess import load_image
+
+    fig = Figure(figsize=(columns * 1.3 + 0.9, len(folders) * 1.3))
+    axes = fig.subplots(len(folders), 1, squeeze=False)[:, 0]
+    for ax, folder, name in zip(axes, folders, names):
+        row = [load_image(p, size) for p in list_images(folder)[:columns]]
+        gap = np.ones((size, 4), dtype=np.float32)
+        ax.imshow(np.concatenate([x for chip in row for x in (chip, gap)][:-1], axis=1), cmap="gray", vmin=0, vmax=1)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_ylabel(name, fontsize=9)
+    fig.subplots_adjust(left=0.04, right=0.995, top=0.99, bottom=0.01, hspace=0.05)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("preset", type=Path)
@@ -40,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--plot", type=Path, help="histograms of the statistics (PNG)")
+    p.add_argument("--figure", type=Path, help="side by side (PNG): a row of real chips, then a row per preset")
+    p.add_argument("--columns", type=int, default=8, help="chips per row of --figure")
     args = p.parse_args(argv)
 
     from sasmi.stats import chip_statistics
@@ -56,6 +80,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"preset={preset} pass={sum(ok.values())}/{len(TOLERANCES)} failed={','.join(k for k, v in ok.items() if not v) or '-'}")
     if args.plot:
         plot(results, args.plot)
+    if args.figure:
+        side_by_side([args.real] + [out for _, out in jobs], ["real"] + [p.stem for p, _ in jobs], args.figure,
+                     args.size, args.columns)
     return 0 if all(check(results[0], results[1]).values()) else 1
 
 

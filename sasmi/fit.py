@@ -3,7 +3,8 @@
 The loop renders K scenes of a preset with the current parameters, encodes them with the
 GAN's φ encoder and pulls the mean φ of the renders towards the mean φ of the real chips;
 the gradient reaches the parameters through `DifferentiableRenderer` (Dr.Jit's AD, wrapped
-as a torch function). What moves is a scale factor per parameter, 1 = the preset as
+as a torch function; central differences of the image for roughness and elevation, which
+move shadow edges that AD does not see). What moves is a scale factor per parameter, 1 = the preset as
 written, so a preset whose fields are distributions keeps its spread and the fitted preset
 scales each field (docs/differentiable.md):
 
@@ -241,7 +242,7 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
         for step in bar:
             # forward: K renders at θ0 · scale, their mean φ against the target
             scale = torch.ones(len(PARAMETERS)).index_put((index,), log_scale.exp())  # (4,)
-            images = torch.stack([renderer.image(b, theta0[k] * scale, sampler_seed(cfg.seed, step, k))
+            images = torch.stack([renderer.image(b, theta0[k] * scale, sampler_seed(cfg.seed, step, k), wrt=cfg.params)
                                   for k, b in enumerate(bound)])  # (K, S, S) in [0, 1]
             phi = encoder(images[:, None] * 2.0 - 1.0)  # (K, D)
             loss = phi_loss(target, phi.mean(0, keepdim=True), 0.0)

@@ -56,6 +56,11 @@ class Sonar:
     cone_angle: float = _spec(30.0, lambda v: 0 < v < 90, "in (0, 90)", "deg; beam half-angle (cutoff)")
     intensity: float = _spec(1.0, _positive, "> 0", "source level, relative to the calibrated exposure")
     altitude: float = _spec(0.0, _nonneg, ">= 0", "m; height of the array above the seafloor; 0 = max_range / 10")
+    slant_range: bool = _spec(False, None, "true or false", "image x axis in slant range from the track "
+                              "(layover, foreshortening), as a sonar forms images; false: ground range")
+    aperture_angle: float = _spec(0.0, lambda v: 0 <= v < 90, "in [0, 90)",
+                                  "deg; > 0: beams look broadside with this along-track width, so the synthetic "
+                                  "aperture grows with range (track_length is then derived); 0: spots aim at the chip")
 
     @property
     def array_altitude(self) -> float:
@@ -134,15 +139,15 @@ class Scene:
                              f"sonar.max_range {s.max_range:g} m")
         f = self.seafloor
         relief = 4 * f.rms_height + f.ripple_amplitude + (1.4 * f.rock_radius if f.rocks else 0.0)
-        if relief >= s.altitude:  # the floor would hide the array: a black chip, not an error, otherwise
+        altitude = f"{s.array_altitude:g} m" + ("" if s.altitude else " (sonar.max_range / 10)")
+        if relief >= s.array_altitude:  # the floor would hide the array: a black chip, not an error, otherwise
             raise SasmiError(f"seafloor: relief up to {relief:g} m (4 rms_height + ripple_amplitude + 1.4 rock_radius) "
-                             f"reaches the array at altitude {s.altitude:g} m (sonar.max_range / 10)")
+                             f"reaches the array at altitude {altitude}")
         half = s.chip_size / 2
         for i, t in enumerate(self.targets):
             top = (target_height(t) or 0.0) - t.burial
-            if top >= s.altitude:
-                raise SasmiError(f"targets[{i}]: rises {top:g} m above the floor, to the array at altitude "
-                                 f"{s.altitude:g} m (sonar.max_range / 10)")
+            if top >= s.array_altitude:
+                raise SasmiError(f"targets[{i}]: rises {top:g} m above the floor, to the array at altitude {altitude}")
             if not (-half < t.x < half):
                 raise SasmiError(f"targets[{i}].x: {t.x:g} m lies outside the chip (allowed: -{half:g} < x < {half:g})")
             if not (-half < t.y < half):

@@ -103,7 +103,7 @@ def find_target(image01: np.ndarray, est: Estimator = Estimator()) -> Target | N
         sr0, sc0, sr1, sc1 = region.bbox
         starts_at_highlight = sc0 <= hc1 + est.shadow_gap * s and region.centroid[1] > hl.centroid[1]
         beside = sr0 < hr1 + pad and sr1 > hr0 - pad
-        deep = dark[labels == region.label].min() < est.shadow_depth
+        deep = dark[region.coords[:, 0], region.coords[:, 1]].min() < est.shadow_depth
         if starts_at_highlight and beside and deep and region.area >= est.min_shadow_area * s * s:
             if best is None or region.area > best.area:
                 best = region

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from sasmi.render.mitsuba import Renderer
+from sasmi.errors import SasmiError
 from sasmi.render.annotate import MASK_SHADOW
 from sasmi.scene import Post, Scene, Seafloor, Sonar, Target
 
@@ -124,3 +125,70 @@ def test_lambert_squared_backscatter_sharpens_the_relief(renderer64):
     contrast = {law: chip(law, 0.02).std() / chip(law, 0.02).mean() for law in ("lambert", "lambert2")}
     assert contrast["lambert2"] > 1.25 * contrast["lambert"], contrast
     assert chip("lambert2", 0.0).mean() == pytest.approx(chip("lambert", 0.0).mean(), rel=0.02)
+
+
+def test_slant_range_lays_a_tall_target_over_the_floor_in_front(renderer64):
+    """sonar.slant_range: a 1.5 m cone under a steep (20 m altitude) array; its top is nearer in slant
+    range than its base, so its highlight moves to the leading (near-range) edge, where the slant
+    geometry puts it (measured: brightest pixels at column 5 against 32 in ground range); a flat floor
+    keeps its level."""
+    from sasmi.render.geometry import build_geometry
+    from sasmi.render.slant import slant_map
+
+    def scene(slant: bool, targets=(Target(shape="cone", x=0.0, length=1.5, radius=0.5, radius_top=0.3),)) -> Scene:
+        return flat_chip(sonar=Sonar(near_range=10.0, altitude=20.0, slant_range=slant), targets=targets)
+
+    def brightest_column(image: np.ndarray) -> float:
+        return float(np.unravel_index(np.argsort(image, axis=None)[-20:], image.shape)[1].mean())
+
+    ground, slant = renderer64.render(scene(False)), renderer64.render(scene(True))
+    top = float(slant_map(build_geometry(scene(True), 64), np.zeros((64, 64))).column(0.0, 1.5 * 2 / 6.0))
+    assert abs(brightest_column(ground.image) - 31.5) < 3
+    assert abs(brightest_column(slant.image) - top) < 3 and top < 15, (brightest_column(slant.image), top)
+    c0, _, c1, _ = slant.labels["targets"][0]["bbox"]
+    assert c0 <= brightest_column(slant.image) < c0 + 0.25 * (c1 - c0)  # the highlight leads the target
+    flat = {s: renderer64.render(scene(s, targets=())).image for s in (False, True)}
+    np.testing.assert_allclose(flat[True].mean(axis=0), flat[False].mean(axis=0), rtol=0.01)
+
+
+def test_aperture_grows_with_range():
+    """sonar.aperture_angle: broadside beams, so the stretch of track that lights a point is 2 R tan(angle / 2):
+    twice the range, twice the aperture (constant along-track resolution). With the paper's spots aimed at
+    the chip centre every point sees the whole 20 m track."""
+    from sasmi.render.geometry import beam_falloff, build_geometry
+
+    def lit_track(aperture: float) -> tuple[float, float]:
+        """m of track lighting the near-edge and the far-edge centre of a 20 m chip (30-50 m)."""
+        scene = flat_chip(sonar=Sonar(near_range=30.0, chip_size=20.0, max_range=65.0, emitters=400,
+                                      aperture_angle=aperture), targets=())
+        g = build_geometry(scene, 16)
+        points = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+        weights = beam_falloff(g.emitter_positions, g.aims, points, g.cone_angle, g.beam_width) \
+            if g.broadside else np.ones((len(g.emitter_positions), 2))
+        spacing = np.diff(g.emitter_positions[:, 1]).mean() * g.metres_per_unit
+        return tuple(weights.sum(axis=0) * spacing)
+
+    near, far = lit_track(20.0)
+    ratio = np.hypot(50.0, 6.5) / np.hypot(30.0, 6.5)  # slant range far / near
+    assert far / near == pytest.approx(ratio, rel=0.05), (near, far)
+    # the profile is 1 out to 7.5 deg and falls linearly to 0 at 10 deg: about 2 R tan(8.75 deg) in all
+    assert near == pytest.approx(2 * np.hypot(30.0, 6.5) * np.tan(np.radians(8.75)), rel=0.1)
+    paper_near, paper_far = lit_track(0.0)
+    assert paper_near == paper_far == pytest.approx(20.0, rel=0.01)
+    with pytest.raises(SasmiError, match="sonar.aperture_angle: 4 deg beams do not cover the chip in elevation"):
+        lit_track(4.0)
+
+
+def test_aperture_keeps_a_flat_floor_even_and_darkens_shadows(renderer64):
+    """With broadside beams the exposure and TVG follow the beam profile (a flat floor stays at its level
+    across range); a narrower aperture than the paper's 20 m track fills a small target's shadow in less
+    (measured 148 -> 212 shadow px for a 0.3 m sphere at 6 deg)."""
+    def scene(aperture: float, targets=()) -> Scene:
+        return flat_chip(sonar=Sonar(near_range=35.0, aperture_angle=aperture), targets=targets)
+
+    flat = renderer64.render(scene(6.0)).image
+    columns = flat.mean(axis=0)
+    assert abs(far_over_near(flat) - 1) < 0.04 and abs(columns.mean() / 0.225 - 1) < 0.03
+    sphere = (Target(shape="sphere", x=-1.5, radius=0.3),)
+    shadow = {a: (renderer64.render(scene(a, sphere)).mask == MASK_SHADOW).sum() for a in (0.0, 6.0)}
+    assert shadow[6.0] > 1.25 * shadow[0.0], shadow

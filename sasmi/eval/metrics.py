@@ -35,7 +35,8 @@ def _cov_factor(x: np.ndarray) -> np.ndarray:
     symmetric eigen square root would add √(round-off) for every near-zero eigenvalue.
     """
     n, d = x.shape
-    centred = (x - x.mean(axis=0)) / math.sqrt(n - 1)
+    centred = x - x.mean(axis=0)
+    centred /= math.sqrt(n - 1)  # in place: one (N, D) copy fewer at the peak
     return centred if n <= d else np.linalg.qr(centred, mode="r")
 
 

@@ -35,7 +35,7 @@ def distance_blocks(query: np.ndarray, reference: np.ndarray):
     n_ref, dim = reference.shape
     ref_step = n_ref if reference.dtype == np.float64 else max(1, BLOCK_BYTES // (8 * dim))
     ref_sq = np.concatenate([(r**2).sum(1) for _, r in _float64_rows(reference, ref_step)])  # (Nr,)
-    for start, q in _float64_rows(query, max(1, BLOCK_BYTES // (8 * max(n_ref, 1)))):
+    for start, q in _float64_rows(query, max(1, BLOCK_BYTES // (8 * max(n_ref, dim)))):  # d and q both bounded
         d = np.empty((len(q), n_ref))
         for r0, r in _float64_rows(reference, ref_step):
             np.matmul(q, r.T, out=d[:, r0:r0 + len(r)])

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
@@ -25,6 +25,11 @@ if TYPE_CHECKING:
     import torch
 
 PARAMETERS = ("seafloor.roughness", "seafloor.albedo", "sonar.intensity", "sonar.elevation")
+# Parameters that move shadow edges, which Dr.Jit's AD of the `direct` integrator does not see
+# (the projective integrators reject the orthographic camera, and spot lights have no edge
+# term): their derivative is a central difference of the image at the same sample seed.
+FINITE_DIFFERENCE = ("seafloor.roughness", "sonar.elevation")
+FD_STEP = 0.01  # relative to the parameter's value
 
 
 def scene_parameters(scene: Scene) -> np.ndarray:
@@ -64,9 +69,10 @@ class DifferentiableRenderer:
     same speckle and noise draws as fixed fields; then clipped to [0, 1]. For every
     parameter the AD graph of one `direct` render is recorded and differentiated (the
     primal and its gradient share one sample stream, so a gradient is that of the very
-    image it came with, which central differences at the same seed check). Visibility is
-    not differentiated: shadow edges that move with θ are missed (docs/differentiable.md
-    lists the measured gradient / finite-difference ratios).
+    image it came with, which central differences at the same seed check). Dr.Jit's AD does
+    not differentiate visibility, so for the parameters that move shadow edges
+    (FINITE_DIFFERENCE: roughness, elevation) `image` passes back a central difference of
+    the image instead (docs/differentiable.md lists the measured ratios).
 
     - roughness r scales the relief: floor z = fixed + r·relief; targets ride along.
     - albedo is the floor's diffuse reflectance; intensity is `sonar.intensity`.
@@ -104,6 +110,12 @@ class DifferentiableRenderer:
         normalised to its rms), which is how a fitted roughness goes back into a preset.
         """
         s = scene.sonar
+        if s.slant_range:
+            raise SasmiError("sonar.slant_range: the differentiable render works in ground range; "
+                             "fit a preset with slant_range = false")
+        if s.aperture_angle:
+            raise SasmiError("sonar.aperture_angle: the differentiable render models spots aimed at the chip "
+                             "centre; fit a preset with aperture_angle = 0")
         unit = 2.0 / s.chip_size  # chip units per metre
         g = build_geometry(scene, self.size)
         relief = surface(dataclasses.replace(scene.seafloor, rocks=0), s.chip_size, scene.seed)
@@ -122,16 +134,48 @@ class DifferentiableRenderer:
             targets_up=tuple(self._upload(np.tile([0.0, 0.0, 1.0], len(m.vertices))) for m in g.targets),
             targets_lift=lifts, speckle=self._upload(fields[0]), noise=self._upload(fields[1]))
 
-    def image(self, bound: BoundScene, theta: "torch.Tensor", seed: int) -> "torch.Tensor":
-        """(H, W) float32 in [0, 1] from θ (4,) in PARAMETERS order; gradients flow back to θ in torch."""
-        assert theta.shape == (len(PARAMETERS),), theta.shape
-        dr = self.dr
+    def image(self, bound: BoundScene, theta: "torch.Tensor", seed: int, wrt: Sequence[str] = PARAMETERS
+              ) -> "torch.Tensor":
+        """(H, W) float32 in [0, 1] from θ (4,) in PARAMETERS order; gradients flow back to θ in torch.
 
-        @dr.wrap(source="torch", target="drjit")
+        For the parameters in `wrt` that are in FINITE_DIFFERENCE the gradient is the central
+        difference of the image (two more renders each, at the same seed, done first: a
+        render on the bound scene after the differentiable one would drop its graph); the
+        others' come from Dr.Jit's AD. The image itself is the same either way.
+        """
+        import torch
+
+        assert theta.shape == (len(PARAMETERS),), theta.shape
+        theta = theta.float()
+        slopes = {}
+        if theta.requires_grad:
+            for name in FINITE_DIFFERENCE:
+                if name in wrt:
+                    slopes[PARAMETERS.index(name)] = self._difference(bound, theta.detach(), name, seed)
+        fd = torch.tensor([i in slopes for i in range(len(PARAMETERS))])
+        image = self._wrapped(bound, torch.where(fd, theta.detach(), theta), seed)
+        for i, slope in slopes.items():
+            image = image + (theta[i] - theta[i].detach()) * slope  # value unchanged, d/dθ_i = slope
+        return image
+
+    def _wrapped(self, bound: BoundScene, theta: "torch.Tensor", seed: int) -> "torch.Tensor":
+        @self.dr.wrap(source="torch", target="drjit")
         def render(theta_dr):
             return self._image(bound, theta_dr.array, seed)
 
-        return render(theta.float())
+        return render(theta)
+
+    def _difference(self, bound: BoundScene, theta: "torch.Tensor", name: str, seed: int) -> "torch.Tensor":
+        """(H, W) central difference d image / d θ[name] at `seed` (common random numbers)."""
+        import torch
+
+        i = PARAMETERS.index(name)
+        step = FD_STEP * max(abs(float(theta[i])), 1e-3)
+        with torch.no_grad():
+            plus, minus = theta.clone(), theta.clone()
+            plus[i] += step
+            minus[i] -= step
+            return (self._wrapped(bound, plus, seed) - self._wrapped(bound, minus, seed)) / (2 * step)
 
     def gradient_image(self, bound: BoundScene, theta: np.ndarray, name: str, seed: int
                        ) -> tuple[np.ndarray, np.ndarray]:

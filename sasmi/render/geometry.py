@@ -40,15 +40,22 @@ class Geometry:
     floor: TriangleMesh
     targets: tuple[TriangleMesh, ...]
     emitter_positions: np.ndarray  # (N, 3) chip units
-    aim: np.ndarray  # (3,) every spot is aimed at the chip centre
+    aims: np.ndarray  # (N, 3) chip units: where each spot points (the chip centre, or broadside with an aperture)
     cone_angle: float  # deg, cutoff half-angle
     beam_width: float  # deg, where the falloff starts
     emitter_intensity: float  # radiant intensity per emitter, exposure folded in
+    broadside: bool = False  # sonar.aperture_angle > 0: the beams' falloff shapes the lighting of the chip
+
+    @property
+    def beam(self) -> tuple | None:
+        """(aims, cutoff, beam_width) when the beams' profiles shape the chip's lighting, else None."""
+        return (self.aims, self.cone_angle, self.beam_width) if self.broadside else None
 
     @property
     def structure(self) -> tuple:
         """What must stay equal for a compiled renderer to be updated in place."""
         return (self.size, len(self.floor.vertices), self.floor.cos_power, len(self.emitter_positions),
+                self.cone_angle, self.beam_width,
                 tuple((len(t.vertices), len(t.faces)) for t in self.targets))
 
 
@@ -148,36 +155,77 @@ def target_mesh(t: Target, floor: Surface, chip_size: float, where: str) -> Tria
     return TriangleMesh((v * (2.0 / chip_size)).astype(np.float32), f, t.albedo)
 
 
+def track_length(sonar) -> float:
+    """m of track the emitters spread over: `track_length`, or with an aperture angle as much as the
+    chip's far corners need for their full aperture (chip_size + 2 R_far tan(angle / 2))."""
+    if not sonar.aperture_angle:
+        return sonar.track_length
+    far = math.hypot(sonar.near_range + sonar.chip_size, sonar.array_altitude)
+    return sonar.chip_size + 2 * far * math.tan(math.radians(sonar.aperture_angle / 2))
+
+
 def emitter_positions(scene: Scene) -> np.ndarray:
     """Emitters along the track (ground range 0) at `sonar.array_altitude`, in chip units."""
     s = scene.sonar
     scale = 2.0 / s.chip_size
     track_x = -(s.near_range + s.chip_size / 2)
-    ys = np.linspace(-s.track_length / 2, s.track_length / 2, s.emitters) if s.emitters > 1 else np.zeros(1)
+    half = track_length(s) / 2
+    ys = np.linspace(-half, half, s.emitters) if s.emitters > 1 else np.zeros(1)
     return np.stack([np.full_like(ys, track_x), ys, np.full_like(ys, s.array_altitude)], 1) * scale
 
 
-def exposure(positions: np.ndarray, cos_power: int = 1) -> float:
+def beam_falloff(positions: np.ndarray, aims: np.ndarray, points: np.ndarray, cutoff: float, beam_width: float
+                 ) -> np.ndarray:
+    """(N, P) spot profile of each emitter towards each point (P, 3), as Mitsuba's `spot`: 1 within
+    beam_width of the axis, linear in the angle to 0 at the cutoff (deg)."""
+    axis = aims - positions
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    to_point = points[None, :, :] - positions[:, None, :]  # (N, P, 3)
+    cos = np.einsum("npk,nk->np", to_point, axis) / np.linalg.norm(to_point, axis=2)
+    angle = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+    return np.clip((cutoff - angle) / (cutoff - beam_width), 0.0, 1.0)
+
+
+def exposure(positions: np.ndarray, cos_power: int = 1, beam: tuple | None = None) -> float:
     """1 / radiance of a flat albedo-1 floor at the chip centre lit by unit spots.
 
     Irradiance from each spot aimed at the centre is I cos(theta) / d^2 (no falloff on
     the beam axis); Lambertian radiance is albedo / pi times the irradiance, and Lambert's
-    cos^2 law (cos_power 2) weighs each spot's part by cos(theta) once more.
+    cos^2 law (cos_power 2) weighs each spot's part by cos(theta) once more. `beam` =
+    (aims, cutoff, beam_width) weighs each spot by its profile (spots not aimed at the centre).
     """
     d2 = (positions**2).sum(1)
     cos_theta = positions[:, 2] / np.sqrt(d2)
-    return float(math.pi / (cos_theta**cos_power / d2).sum())
+    weight = 1.0 if beam is None else beam_falloff(positions, beam[0], np.zeros((1, 3)), *beam[1:])[:, 0]
+    return float(math.pi / (weight * cos_theta**cos_power / d2).sum())
 
 
-def flat_floor_irradiance(positions: np.ndarray, size: int, cos_power: int = 1) -> np.ndarray:
-    """(size, size) sum of cos(theta)^cos_power / d^2 over the emitters for a flat floor at pixel centres."""
+def flat_floor_irradiance(positions: np.ndarray, size: int, cos_power: int = 1, beam: tuple | None = None
+                          ) -> np.ndarray:
+    """(size, size) sum of [profile x] cos(theta)^cos_power / d^2 over the emitters, flat floor at pixel centres."""
     centres = (np.arange(size) + 0.5) / size * 2 - 1
+    if beam is not None:
+        x, y = np.meshgrid(centres, centres)
+        points = np.stack([x.ravel(), y.ravel(), np.zeros(size * size)], 1)
+        weights = beam_falloff(positions, beam[0], points, *beam[1:]).reshape(len(positions), size, size)
     total = np.zeros((size, size))
-    for px, py, pz in positions:
+    for k, (px, py, pz) in enumerate(positions):
         d2 = ((px - centres) ** 2)[None, :] + ((py - centres) ** 2 + pz**2)[:, None]  # (rows = y, cols = x)
         cos_theta = pz / np.sqrt(d2)
-        total += (cos_theta if cos_power == 1 else cos_theta**cos_power) / d2
+        part = (cos_theta if cos_power == 1 else cos_theta**cos_power) / d2
+        total += part if beam is None else weights[k] * part
     return total
+
+
+def check_elevation_coverage(sonar, beam_width: float) -> None:
+    """Broadside beams are circular: their elevation width is the aperture's, and must span the chip's
+    depression angles (near to far edge) around the chip centre, or the chip's edges would go dark."""
+    depression = [math.degrees(math.atan2(sonar.array_altitude, x))
+                  for x in (sonar.near_range, sonar.near_range + sonar.chip_size / 2, sonar.near_range + sonar.chip_size)]
+    spread = max(depression[0] - depression[1], depression[1] - depression[2])
+    if spread > beam_width:
+        raise SasmiError(f"sonar.aperture_angle: {sonar.aperture_angle:g} deg beams do not cover the chip in elevation "
+                         f"(allowed: >= {spread / 0.75 * 2:.3g} deg for this chip, range and altitude)")
 
 
 def build_geometry(scene: Scene, size: int) -> Geometry:
@@ -185,15 +233,24 @@ def build_geometry(scene: Scene, size: int) -> Geometry:
     seabed = surface(scene.seafloor, s.chip_size, scene.seed)
     floor = floor_mesh(seabed.grid(size), s.chip_size, scene.seafloor.albedo, COS_POWER[scene.seafloor.backscatter])
     targets = tuple(target_mesh(t, seabed, s.chip_size, f"targets[{i}]") for i, t in enumerate(scene.targets))
-    positions = emitter_positions(scene)
+    positions = emitter_positions(scene).astype(np.float64)
+    broadside = s.aperture_angle > 0
+    aims = np.zeros_like(positions)
+    if broadside:  # each beam looks across the track at the chip centre's range, from its own place on the track
+        aims[:, 1] = positions[:, 1]
+    cone = s.aperture_angle / 2 if broadside else s.cone_angle
+    if broadside:
+        check_elevation_coverage(s, 0.75 * cone)
+    beam = (aims, cone, 0.75 * cone) if broadside else None
     return Geometry(
         size=size,
         metres_per_unit=s.chip_size / 2,
         floor=floor,
         targets=targets,
-        emitter_positions=positions.astype(np.float64),
-        aim=np.zeros(3),
-        cone_angle=s.cone_angle,
-        beam_width=0.75 * s.cone_angle,
-        emitter_intensity=s.intensity * scene.post.gain * exposure(positions, floor.cos_power),
+        emitter_positions=positions,
+        aims=aims,
+        cone_angle=cone,
+        beam_width=0.75 * cone,
+        emitter_intensity=s.intensity * scene.post.gain * exposure(positions, floor.cos_power, beam),
+        broadside=broadside,
     )

@@ -13,7 +13,7 @@ render kernel once per process and later images cost only the render itself.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -28,7 +28,8 @@ from sasmi.render.bsdf import register as register_bsdf
 from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.post import post_maps, postprocess
-from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, mi_mesh, shape_ids, visibility
+from sasmi.render.slant import labels_to_slant, slant_map, to_slant
+from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, mi_mesh, shape_ids, surface_heights, visibility
 from sasmi.scene import Scene
 
 
@@ -75,8 +76,8 @@ def load_scene(mi, dr, g: Geometry, spp: int):
         d[name].set_bsdf(mi.load_dict(bsdf_dict(mesh.albedo, mesh.cos_power)))
     # One intensity texture shared by every spot: traverse lists it once, under emitter_0.
     intensity = mi.load_dict({"type": "uniform", "value": g.emitter_intensity})
-    for k, p in enumerate(g.emitter_positions):
-        d[f"emitter_{k}"] = {"type": "spot", "to_world": spot_to_world(mi, p, g.aim), "cutoff_angle": g.cone_angle,
+    for k, (p, aim) in enumerate(zip(g.emitter_positions, g.aims)):
+        d[f"emitter_{k}"] = {"type": "spot", "to_world": spot_to_world(mi, p, aim), "cutoff_angle": g.cone_angle,
                              "beam_width": g.beam_width, "intensity": intensity}
     return mi.load_dict(d)
 
@@ -112,8 +113,8 @@ class Renderer:
             p[f"target_{k}.vertex_positions"] = aligned(t.vertices)
             p[f"target_{k}.bsdf.reflectance.value"] = t.albedo
         self._occluders.update(g)
-        for k, pos in enumerate(g.emitter_positions):
-            p[f"emitter_{k}.to_world"] = spot_to_world(self.mi, pos, g.aim)
+        for k, (pos, aim) in enumerate(zip(g.emitter_positions, g.aims)):
+            p[f"emitter_{k}.to_world"] = spot_to_world(self.mi, pos, aim)
         p["emitter_0.intensity.value"] = g.emitter_intensity
         p.update()
 
@@ -153,10 +154,25 @@ class Renderer:
         self.prepare(g)
         launched = self.launch(scene.seed)
         maps = post_maps(scene, g)  # numpy work while the render runs
-        image = postprocess(self.collect(launched), maps)
+        radiance = self.collect(launched)
         visible, owner = self.visibility(g)
-        return Rendered(image=image, mask=class_mask(visible, owner),
+        if scene.sonar.slant_range:
+            return self._render_slant(scene, g, radiance, maps, visible, owner)
+        return Rendered(image=postprocess(radiance, maps), mask=class_mask(visible, owner),
                         label=chip_label(scene, visible, owner, self.size),
+                        instances=instance_ids(visible), shadows=instance_ids(owner))
+
+    def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner) -> Rendered:
+        """The chip with its x axis in slant range (sasmi.render.slant): gain before the move, speckle after."""
+        gain, speckle, offset = maps
+        m = slant_map(g, surface_heights(self.mi, self._scene, self.size))
+        image = postprocess(to_slant(radiance * gain, m), (np.ones_like(gain), speckle, offset))
+        visible, owner = labels_to_slant(visible, owner, m)
+        label = chip_label(scene, visible, owner, self.size)
+        unit = 2.0 / scene.sonar.chip_size
+        targets = tuple(replace(t, pixel_centre=(float(m.column(t.params["x"] * unit, 0.0)), t.pixel_centre[1]))
+                        for t in label.targets)
+        return Rendered(image=image, mask=class_mask(visible, owner), label=replace(label, targets=targets),
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
 

@@ -21,14 +21,15 @@ Maps = tuple[np.ndarray, np.ndarray, np.ndarray]  # (H, W) float64 each: gain, s
 FWHM_PER_SIGMA = 2 * math.sqrt(2 * math.log(2))
 
 
-def tvg_gain(positions: np.ndarray, size: int, cos_power: int = 1, strength: float = 1.0) -> np.ndarray:
+def tvg_gain(positions: np.ndarray, size: int, cos_power: int = 1, strength: float = 1.0, beam: tuple | None = None
+             ) -> np.ndarray:
     """(size, size) gain, 1 at the chip centre; strength 1 makes a flat floor equally bright everywhere.
 
     A partial TVG (strength < 1) applies that gain to the power `strength`, so a share of
     the flat floor's fall-off with range remains, as in chips from a sonar whose TVG does
     not quite follow spreading and grazing loss.
     """
-    gain = (math.pi / exposure(positions, cos_power)) / flat_floor_irradiance(positions, size, cos_power)
+    gain = (math.pi / exposure(positions, cos_power, beam)) / flat_floor_irradiance(positions, size, cos_power, beam)
     return gain if strength == 1 else gain**strength
 
 
@@ -80,7 +81,7 @@ def post_maps(scene: Scene, g: Geometry) -> Maps:
     """(H, W) time-varying gain (1 when off), speckle (mean 1) and additive offset of `scene`."""
     post = scene.post
     if post.tvg:
-        gain = tvg_gain(g.emitter_positions, g.size, g.floor.cos_power, post.tvg_strength)
+        gain = tvg_gain(g.emitter_positions, g.size, g.floor.cos_power, post.tvg_strength, g.beam)
     else:
         gain = np.ones((g.size, g.size))
     return (gain, *post_fields(scene, g.size))

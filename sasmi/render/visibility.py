@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from sasmi.render.geometry import Geometry, TriangleMesh
+from sasmi.render.geometry import Geometry, TriangleMesh, beam_falloff
 from sasmi.render.llvm import aligned
 
 CAMERA_HEIGHT = 50.0  # chip units above the floor; far above any target
 SHADOW_FRACTION = 0.5  # a floor point is in acoustic shadow when a target hides it from half the array
 SHADOW_PROBES = 8  # emitters, evenly spread over the array, that the shadow mask is tested against
+APERTURE_PROBES = 24  # with broadside beams (sonar.aperture_angle) only some probes light each point
 
 
 def mi_mesh(mi, name: str, mesh: TriangleMesh):
@@ -43,11 +44,11 @@ def index_of(ids: np.ndarray, target_ids: np.ndarray) -> np.ndarray:
     return out
 
 
-def shadow_emitters(positions: np.ndarray) -> np.ndarray:
-    """SHADOW_PROBES emitters spread evenly over the array (all of them if there are fewer)."""
-    if len(positions) <= SHADOW_PROBES:
-        return positions
-    return positions[np.round(np.linspace(0, len(positions) - 1, SHADOW_PROBES)).astype(int)]
+def shadow_probes(count: int, probes: int = SHADOW_PROBES) -> np.ndarray:
+    """Indices of `probes` emitters spread evenly over the array (all of them if there are fewer)."""
+    if count <= probes:
+        return np.arange(count)
+    return np.round(np.linspace(0, count - 1, probes)).astype(int)
 
 
 def shadow_candidates(g: Geometry, points: np.ndarray) -> np.ndarray:
@@ -101,6 +102,19 @@ class Occluders:
         return index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64), self.ids)
 
 
+def camera_hits(mi, scene, n: int):
+    """Mitsuba SurfaceInteraction of the rays through the n x n pixel centres, straight down."""
+    centres = (np.arange(n) + 0.5) / n * 2 - 1
+    xs, ys = np.meshgrid(centres, centres)
+    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
+    return scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+
+
+def surface_heights(mi, scene, n: int) -> np.ndarray:
+    """(n, n) float64 height (chip units) of the surface seen through each pixel centre."""
+    return np.asarray(camera_hits(mi, scene, n).p.z, dtype=np.float64).reshape(n, n)
+
+
 def visibility(mi, dr, scene, target_ids: np.ndarray, occluders: Occluders, g: Geometry
                ) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) int64 each: index of the visible target (-1 none) and of the target shadowing the pixel (-1 none).
@@ -108,25 +122,27 @@ def visibility(mi, dr, scene, target_ids: np.ndarray, occluders: Occluders, g: G
     `scene` is the loaded Mitsuba scene of `g` (floor and targets), `target_ids` its targets' ids.
     """
     n = g.size
-    centres = (np.arange(n) + 0.5) / n * 2 - 1
-    xs, ys = np.meshgrid(centres, centres)
-    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
-    si = scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+    si = camera_hits(mi, scene, n)
     visible = index_of(np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64), target_ids)
 
     lifted = np.asarray(si.p + si.n * 1e-4, dtype=np.float32).reshape(3, -1).T  # (P, 3)
-    emitters = shadow_emitters(g.emitter_positions).astype(np.float32)  # (K, 3)
+    probes = shadow_probes(len(g.emitter_positions), APERTURE_PROBES if g.broadside else SHADOW_PROBES)
+    emitters = g.emitter_positions[probes].astype(np.float32)  # (K, 3)
     owner = np.full(n * n, -1, dtype=np.int64)
     candidates = np.nonzero(shadow_candidates(g, lifted) & (visible < 0))[0]
     if candidates.size:
         points = lifted[candidates]
+        # with broadside beams a probe counts as much as it lights the point; else every probe counts 1
+        weights = (beam_falloff(g.emitter_positions[probes], g.aims[probes], points.astype(np.float64),
+                                g.cone_angle, g.beam_width) if g.broadside else np.ones((len(probes), len(points))))
         # one launch for all probes, probe-major: (K * C, 3)
         blocker = occluders.first_hit(np.tile(points, (len(emitters), 1)), np.repeat(emitters, len(points), axis=0))
-        counts = np.zeros((len(g.targets) + 1, len(points)), dtype=np.int32)  # row 0: nothing in the way
-        for per_probe in blocker.reshape(len(emitters), len(points)):
-            counts[per_probe + 1, np.arange(len(points))] += 1  # one blocker per point: no repeats
+        counts = np.zeros((len(g.targets) + 1, len(points)))  # row 0: nothing in the way
+        for per_probe, weight in zip(blocker.reshape(len(emitters), len(points)), weights):
+            counts[per_probe + 1, np.arange(len(points))] += weight  # one blocker per point: no repeats
         blocked = counts[1:]
-        owner[candidates] = np.where(blocked.max(axis=0) >= SHADOW_FRACTION * len(emitters),
+        lit = weights.sum(axis=0)
+        owner[candidates] = np.where((blocked.max(axis=0) >= SHADOW_FRACTION * lit) & (lit > 0),
                                      blocked.argmax(axis=0), -1)
     owner = np.where(visible >= 0, -1, owner)
     return visible.reshape(n, n), owner.reshape(n, n)
