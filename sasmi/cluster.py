@@ -5,37 +5,21 @@ only a few tasks per worker thread in flight, so several drivers on one folder s
 work instead of one claiming everything up front. Workers write their chips themselves
 (the output folder must be on a filesystem they share) or return them to the driver.
 
-Thread pools: a process that renders runs Dr.Jit's pool, a process that translates runs
-torch's; pools that together ask for more threads than cores spin against each other
-(a DCGAN step went from 1.1 s to 11 s beside a render on 2 cores). A local cluster of N
-workers gives each cores // N Dr.Jit threads; a worker of a remote cluster takes as many as
-Dask gave it (its --nthreads, e.g. cores / processes of a dask-jobqueue job).
+Thread pools (sasmi.threads): a local cluster of N workers gives each cores // N Dr.Jit
+threads (the caller counts a generator in the driver as one more); a worker of a remote
+cluster takes as many as Dask gave it (its --nthreads, e.g. cores / processes of a
+dask-jobqueue job).
 """
 from __future__ import annotations
 
 import contextlib
 import logging
-import os
-import sys
 from typing import Callable, Iterator
 
 from sasmi.errors import SasmiError
 
 CONNECT_TIMEOUT_S = 30
 TASKS_PER_THREAD = 2  # in flight per worker thread: enough to hide the round trip, few enough to share
-
-
-def local_threads(processes: int) -> int:
-    """Threads per process when `processes` share this machine's cores."""
-    return max(1, (os.cpu_count() or 1) // processes)
-
-
-def share_torch_threads(processes: int) -> None:
-    """torch in this process takes its share of the cores (never more than it had)."""
-    if "torch" in sys.modules:
-        import torch
-
-        torch.set_num_threads(min(torch.get_num_threads(), local_threads(processes)))
 
 
 @contextlib.contextmanager

@@ -134,18 +134,21 @@ def render_chip(job: RenderJob, index: int, write: bool = True, threads: int | N
 Task = Callable[..., object]
 
 
-def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object], bool], **kwargs) -> Iterator:
+def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object], bool], busy_here: int = 0,
+              **kwargs) -> Iterator:
     """(item, task(job, item, threads=..., **kwargs)) for each item of `items` that `claim` grants, in
     completion order: in this process (--workers 1), on a local Dask cluster (--workers N) or on the
-    cluster at --scheduler."""
+    cluster at --scheduler. `busy_here`: thread pools of this process busy meanwhile (a generator),
+    which local workers leave their share of the cores to."""
     if job.scheduler is None and job.workers == 1:
         for item in items:
             if claim(item):
                 yield item, task(job, item, **kwargs)
         return
-    from sasmi.cluster import dask_client, local_threads, stream
+    from sasmi.cluster import dask_client, stream
+    from sasmi.threads import local_threads
 
-    threads = None if job.scheduler else local_threads(job.workers)
+    threads = None if job.scheduler else local_threads(job.workers + busy_here)
     remote = replace(job, out=job.out.resolve())  # workers may run elsewhere, in another folder
     with dask_client(job.scheduler, job.workers) as client:
         yield from stream(client, task, remote, items, claim, threads, **kwargs)
@@ -251,14 +254,15 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
 
     indices = job.indices()
     todo = [i for i in indices if not is_complete(job.out, i, job.image_format)]
-    if transform is not None and job.workers > 1:
-        from sasmi.cluster import share_torch_threads
+    beside = transform is not None and job.workers > 1  # the driver's generator runs beside local workers
+    if beside:
+        from sasmi.threads import share_torch_threads
 
-        share_torch_threads(job.workers + 1)  # the driver's generator runs beside the render workers
+        share_torch_threads(job.workers + 1)
     with tqdm(total=len(indices), initial=len(indices) - len(todo), unit="img", desc="render",
               disable=not progress, dynamic_ncols=True) as bar:
         try:
-            stream = run_tasks(job, render_chip, todo, claim, write=transform is None)
+            stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), write=transform is None)
             while chunk := list(itertools.islice(stream, batch if transform else 1)):
                 if transform is not None:
                     images = transform(np.stack([rendered.image for _, rendered in chunk]))  # (B, H, W) in [0, 1]
