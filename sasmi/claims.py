@@ -8,7 +8,7 @@ not mistaken for the holder). The holder removes it when the item is complete.
 A claim of a dead holder is stale and may be taken over:
 - same host: the pid no longer runs (or runs a different process);
 - other host: its liveness cannot be asked, so the file's age decides (`stale_after`
-  seconds without a touch; holders of long items call `touch`).
+  seconds without a touch; `kept_alive` touches every held claim meanwhile).
 Taking over renames the stale file away first; the rename succeeds for one process only,
 and a process that finds it moved a live claim by mistake (a three-way race) puts it back.
 """
@@ -18,6 +18,7 @@ import contextlib
 import json
 import os
 import socket
+import threading
 import time
 from pathlib import Path
 
@@ -111,6 +112,25 @@ class Claims:
         """Tell other hosts that the claim is alive (for items that take longer than `stale_after`)."""
         with contextlib.suppress(FileNotFoundError):
             os.utime(self._path(name))
+
+    @contextlib.contextmanager
+    def kept_alive(self, every: float | None = None):
+        """Context: a thread touches the held claims every `every` s (default stale_after / 4), so that
+        processes on other hosts do not take them over while long items (a tar shard) render."""
+        stop = threading.Event()
+
+        def beat() -> None:
+            while not stop.wait(every or self.stale_after / 4):
+                for name in list(self.held):
+                    self.touch(name)
+
+        thread = threading.Thread(target=beat, name="claims-keep-alive", daemon=True)
+        thread.start()
+        try:
+            yield self
+        finally:
+            stop.set()
+            thread.join()
 
     def release(self, name: str) -> None:
         if name in self.held:

@@ -260,7 +260,7 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
 
         share_torch_threads(job.workers + 1)
     with tqdm(total=len(indices), initial=len(indices) - len(todo), unit="img", desc="render",
-              disable=not progress, dynamic_ncols=True) as bar:
+              disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
         try:
             stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), write=transform is None)
             while chunk := list(itertools.islice(stream, batch if transform else 1)):

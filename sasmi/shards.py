@@ -111,7 +111,7 @@ def render_shards(job: RenderJob, progress: bool = True) -> Path:
 
     total = sum(len(_samples(job, k)) for k in mine)
     with tqdm(total=total, initial=total - sum(len(_samples(job, k)) for k in todo), unit="img",
-              desc="render shards", disable=not progress, dynamic_ncols=True) as bar:
+              desc="render shards", disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
         try:
             for k, samples in run_tasks(job, write_shard, todo, claim):
                 claims.release(f"shard-{k:06d}")

@@ -211,3 +211,18 @@ def test_a_rerun_after_an_early_failure_may_change_settings(tmp_path, capsys):
     assert main(["render", PRESET, "--out", str(out), "--count", "1", "--size", "32", "--spp", "4"]) == 0
     assert main(["render", PRESET, "--out", str(out), "--count", "2", "--size", "32", "--spp", "4"]) == 0
     assert json.loads((out / "run.json").read_text())["count"] == 2
+
+
+def test_held_claims_are_kept_alive_for_other_hosts(tmp_path, monkeypatch):
+    import sasmi.claims
+    from sasmi.claims import Claims
+
+    holder = Claims(tmp_path, stale_after=0.5)
+    assert holder.take("shard-000000")
+    monkeypatch.setattr(sasmi.claims, "HOST", "another-host")  # what a process elsewhere sees
+    other = Claims(tmp_path, stale_after=0.5)
+    with holder.kept_alive(every=0.1):
+        time.sleep(1.0)
+        assert not other.take("shard-000000"), "a claim touched meanwhile is alive"
+    time.sleep(0.7)
+    assert other.take("shard-000000"), "untouched for longer than stale_after: its holder is gone"
