@@ -16,7 +16,6 @@ Shards are claimed like chips (sasmi.claims), so processes and --shard I/N share
 """
 from __future__ import annotations
 
-import contextlib
 import io
 import json
 import shutil
@@ -128,6 +127,11 @@ def render_shards(job: RenderJob, progress: bool = True) -> Path:
     return job.out
 
 
+def has_shards(folder: str | Path) -> bool:
+    folder = Path(folder)
+    return any((folder / "shards").glob("shard-*.tar")) or any(folder.glob("shard-*.tar"))
+
+
 def shard_files(folder: str | Path) -> list[Path]:
     """The tar shards of a --format wds render (OUT or OUT/shards), in order."""
     folder = Path(folder)
@@ -137,19 +141,42 @@ def shard_files(folder: str | Path) -> list[Path]:
     return found
 
 
-def read_shard_images(folder: str | Path, size: int) -> list:
-    """Every sample's image of a wds render, short side resized to `size`: a list of (1, h, w) float32
-    tensors in [0, 1], in sample order (what gan.data.ImageSet holds)."""
-    import webdataset as wds
+def _decode(data: bytes):
     from PIL import Image
+
+    with Image.open(io.BytesIO(data)) as im:
+        return np.asarray(im)  # palette masks stay ids; images are mode L
+
+
+def read_shards(folder: str | Path, size: int, masks: bool = False) -> tuple[list, list | None]:
+    """Every sample of a wds render, in sample order, as gan.data.ImageSet holds a render set:
+    images (1, h, w) float32 in [0, 1] with short side `size`, and with masks=True the class
+    masks (1, h, w) uint8 resized (nearest) to the same h, w; else None."""
+    import torch
+    import torch.nn.functional as F
+    import webdataset as wds
 
     from sasmi.preprocess import check_size, resize_short_side
 
     check_size(size)
-    images = []
-    for sample in wds.WebDataset([str(p) for p in shard_files(folder)], shardshuffle=False, empty_check=False):
-        with contextlib.suppress(KeyError), Image.open(io.BytesIO(sample["png"])) as im:
-            images.append(resize_short_side(np.asarray(im.convert("L"), dtype=np.float32) / 255.0, size))
+    images, classes = [], [] if masks else None
+    try:
+        for sample in wds.WebDataset([str(p) for p in shard_files(folder)], shardshuffle=False, empty_check=False):
+            if "png" not in sample or (masks and "mask.png" not in sample):
+                raise SasmiError(f"{sample['__url__']}: sample {sample['__key__']} has no image or mask")
+            image = resize_short_side(_decode(sample["png"]).astype(np.float32) / 255.0, size)
+            images.append(image)
+            if classes is not None:
+                mask = torch.from_numpy(_decode(sample["mask.png"]).astype(np.uint8))[None, None]
+                classes.append(F.interpolate(mask.float(), size=tuple(image.shape[1:]), mode="nearest")[0]
+                               .to(torch.uint8))
+    except (OSError, ValueError, tarfile.TarError) as e:
+        raise SasmiError(f"{folder}: unreadable shard ({type(e).__name__}: {e})") from None
     if not images:
-        raise SasmiError(f"{folder}: its shards hold no image (NNNNNN.png)")
-    return images
+        raise SasmiError(f"{folder}: its shards hold no sample")
+    return images, classes
+
+
+def read_shard_images(folder: str | Path, size: int) -> list:
+    """The images of read_shards: a list of (1, h, w) float32 tensors in [0, 1]."""
+    return read_shards(folder, size)[0]

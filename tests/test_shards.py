@@ -106,3 +106,23 @@ def test_read_shard_images_for_training(wds_set, render_set):
 
     want = resize_short_side(read_gray(render_set / "images" / "000003.png"), 16)
     assert float((images[3] - want).abs().max()) <= 1.5 / 255
+
+
+def test_read_shards_with_masks(wds_set, render_set):
+    from sasmi.shards import has_shards, read_shards
+
+    assert has_shards(wds_set) and not has_shards(render_set)
+    images, masks = read_shards(wds_set, 32, masks=True)
+    for i in (0, 6):
+        want = np.asarray(Image.open(render_set / "masks" / f"{i:06d}.png"))
+        assert masks[i].shape == (1, 32, 32) and np.array_equal(masks[i][0].numpy(), want)
+
+
+def test_broken_shard_is_one_error(tmp_path):
+    from sasmi.errors import SasmiError
+    from sasmi.shards import read_shard_images
+
+    (tmp_path / "shards").mkdir()
+    (tmp_path / "shards" / "shard-000000.tar").write_bytes(b"not a tar" * 100)
+    with pytest.raises(SasmiError, match="unreadable shard"):
+        read_shard_images(tmp_path, 16)
