@@ -261,8 +261,8 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
         share_torch_threads(job.workers + 1)
     with tqdm(total=len(indices), initial=len(indices) - len(todo), unit="img", desc="render",
               disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
+        stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), write=transform is None)
         try:
-            stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), write=transform is None)
             while chunk := list(itertools.islice(stream, batch if transform else 1)):
                 if transform is not None:
                     images = transform(np.stack([rendered.image for _, rendered in chunk]))  # (B, H, W) in [0, 1]
@@ -272,6 +272,7 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
                     claims.release(_name(index))
                 bar.update(len(chunk))
         finally:
+            stream.close()  # on an error: cancels the cluster's tasks and closes a local cluster now
             claims.release_all()
     if not missing(job.out, job.count, job.image_format):
         assemble_labels(job.out, job.count)

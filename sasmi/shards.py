@@ -111,11 +111,13 @@ def render_shards(job: RenderJob, progress: bool = True) -> Path:
     total = sum(len(_samples(job, k)) for k in mine)
     with tqdm(total=total, initial=total - sum(len(_samples(job, k)) for k in todo), unit="img",
               desc="render shards", disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
+        stream = run_tasks(job, write_shard, todo, claim)
         try:
-            for k, samples in run_tasks(job, write_shard, todo, claim):
+            for k, samples in stream:
                 claims.release(f"shard-{k:06d}")
                 bar.update(samples)
         finally:
+            stream.close()
             claims.release_all()
     if not missing_shards(job):
         n = shard_count(job.count, job.per_shard)

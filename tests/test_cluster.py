@@ -103,3 +103,18 @@ def test_unreachable_scheduler_is_one_line(tmp_path, capsys, monkeypatch):
     assert main(["render", PRESET, "--out", str(tmp_path / "x"), "--count", "1", "--size", "32", "--spp", "4",
                  "--scheduler", f"tcp://127.0.0.1:{free_port()}"]) == 2
     assert "--scheduler tcp://127.0.0.1:" in capsys.readouterr().err
+
+
+def test_a_failing_chip_on_a_worker_is_one_error_and_frees_the_claims(tmp_path, scheduler, capsys):
+    out = tmp_path / "failing"
+    argv = ["render", PRESET, "--out", str(out), "--size", "32", "--spp", "4", "--scheduler", scheduler]
+    assert main([*argv, "--count", "1"]) == 0
+    (out / "labels" / "000003.json").mkdir()  # the worker cannot write chip 3's labels
+    assert main([*argv, "--count", "6"]) == 2
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if line.startswith("sasmi render:")]
+    assert len(errors) == 1 and "000003.json: cannot write" in errors[0] and "Traceback" not in err, err
+    assert not list((out / "claims").glob("*.claim"))
+    (out / "labels" / "000003.json").rmdir()
+    assert main([*argv, "--count", "6"]) == 0
+    assert len((out / "labels.jsonl").read_text().splitlines()) == 6 and not (out / "claims").exists()
