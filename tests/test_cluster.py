@@ -118,3 +118,18 @@ def test_a_failing_chip_on_a_worker_is_one_error_and_frees_the_claims(tmp_path, 
     (out / "labels" / "000003.json").rmdir()
     assert main([*argv, "--count", "6"]) == 0
     assert len((out / "labels.jsonl").read_text().splitlines()) == 6 and not (out / "claims").exists()
+
+
+@pytest.mark.parametrize("extra, flag", [(["--scheduler", "8786"], "argument --scheduler"),
+                                         (["--scheduler", "http://x:1"], "argument --scheduler"),
+                                         (["--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--scheduler and --workers")])
+def test_bad_scheduler_flags(tmp_path, capsys, extra, flag):
+    assert main(["render", PRESET, "--out", str(tmp_path / "x"), "--count", "1", *extra]) == 2
+    assert flag in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_scheduler_addresses_accepted():
+    from sasmi.commands.render_cmd import scheduler_address
+
+    for text in ("tcp://127.0.0.1:8786", "tcp://[::1]:8786", "tls://node-3.cluster:8786", "node3:8786"):
+        assert scheduler_address(text) == text

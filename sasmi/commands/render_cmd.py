@@ -22,7 +22,7 @@ def shard_spec(text: str) -> tuple[int, int]:
 
 
 def scheduler_address(text: str) -> str:
-    if not re.fullmatch(r"(tcp|tls|ws|wss|ucx)://[^\s/:]+(:\d{1,5})?/?|[^\s/:]+:\d{1,5}", text):
+    if not re.fullmatch(r"(tcp|tls|ws|wss|ucx)://(\[[0-9a-fA-F:]+\]|[^\s/:\[\]]+)(:\d{1,5})?/?|[^\s/:]+:\d{1,5}", text):
         raise argparse.ArgumentTypeError(f"{text!r} is not a scheduler address (allowed: tcp://HOST:PORT)")
     return text
 
