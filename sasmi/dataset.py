@@ -140,7 +140,7 @@ def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object],
     completion order: in this process (--workers 1), on a local Dask cluster (--workers N) or on the
     cluster at --scheduler. `busy_here`: thread pools of this process busy meanwhile (a generator),
     which local workers leave their share of the cores to."""
-    if job.scheduler is None and job.workers == 1:
+    if job.scheduler is None and (job.workers == 1 or len(items) <= 1):  # a cluster would only cost its start
         for item in items:
             if claim(item):
                 yield item, task(job, item, **kwargs)
@@ -148,9 +148,10 @@ def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object],
     from sasmi.cluster import dask_client, stream
     from sasmi.threads import local_threads
 
-    threads = None if job.scheduler else local_threads(job.workers + busy_here)
+    workers = min(job.workers, len(items))
+    threads = None if job.scheduler else local_threads(workers + busy_here)
     remote = replace(job, out=job.out.resolve())  # workers may run elsewhere, in another folder
-    with dask_client(job.scheduler, job.workers) as client:
+    with dask_client(job.scheduler, workers) as client:
         yield from stream(client, task, remote, items, claim, threads, **kwargs)
 
 
