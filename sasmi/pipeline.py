@@ -39,6 +39,8 @@ class FitPlan:
     preset: str = "cylinder_chip"
     renders: int = 400  # the GAN's render set, and the set the report translates
     seed: int = 0
+    gan: str = "small_data"  # SAS GAN settings: a shipped recipe's name (gan/recipes/) or a TOML file
+    phi: str = ""  # an existing autoencoder run to use instead of training RUN/phi
 
     def identity(self) -> dict:
         """What a rerun must share with the run it continues (the budget may grow)."""
@@ -126,7 +128,8 @@ def fit(plan: FitPlan, device) -> Path:
     from sasmi.scene import load_preset
 
     check_size(plan.size)
-    preset = load_preset(plan.preset)  # a bad preset fails before anything is written
+    preset = load_preset(plan.preset)  # a bad preset and a bad recipe fail before anything is written
+    gan_settings = sasgan_settings(plan.gan)
     for flag, folder in (("--real", plan.real), ("--phi-real", plan.phi_real), ("--validation", plan.validation)):
         if not list_images(folder):
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
@@ -137,7 +140,12 @@ def fit(plan: FitPlan, device) -> Path:
     def stage_time(stage: str) -> float:
         return SHARE[stage] * budget - state.seconds.get(stage, 0.0)
 
-    if "phi" not in state.done:  # trained once: a φ that moved under a trained GAN would void its φ loss
+    phi = Path(plan.phi) if plan.phi else out / "phi"
+    if plan.phi:
+        from gan.autoencoder import load_encoder
+
+        load_encoder(phi)  # a bad --phi fails here, not after the renders
+    elif "phi" not in state.done:  # trained once: a φ that moved under a trained GAN would void its φ loss
         _log("phi", f"training on {plan.phi_real}", plan, state.used)
         train_for(AUTOENCODER, {"size": plan.size, "seed": plan.seed}, out / "phi", {"real": plan.phi_real},
                   device, stage_time("phi"), "phi", state)
@@ -153,8 +161,8 @@ def fit(plan: FitPlan, device) -> Path:
 
     if "sasgan" not in state.done or stage_time("sasgan") > 60:
         _log("sasgan", f"training on {plan.real} and the renders", plan, state.used)
-        train_for(SASGAN, {"size": plan.size, "seed": plan.seed}, out / "sasgan",
-                  {"real": plan.real, "renders": out / "renders", "phi": out / "phi"}, device, stage_time("sasgan"),
+        train_for(SASGAN, {**gan_settings, "size": plan.size, "seed": plan.seed}, out / "sasgan",
+                  {"real": plan.real, "renders": out / "renders", "phi": phi}, device, stage_time("sasgan"),
                   "sasgan", state)
         state.add("sasgan", 0.0, done=True)
         state.done = [s for s in state.done if s not in ("translated", "report")]  # a longer GAN run: redo these
@@ -186,7 +194,7 @@ def report(plan: FitPlan, device) -> Path:
     from sasmi.eval.run import StderrLog, evaluate_folders
 
     out = Path(plan.out)
-    encoder = as_encoder(out / "phi", device)
+    encoder = as_encoder(Path(plan.phi) if plan.phi else out / "phi", device)
     inputs = {"validation": plan.validation, "real (GAN)": plan.real, "phi real": plan.phi_real}
     note = "" if Path(plan.validation).resolve() != Path(plan.real).resolve() else (
         "\n\n> **Warning.** The report compares with the chips the GAN trained on: its figures are optimistic. "
@@ -197,6 +205,43 @@ def report(plan: FitPlan, device) -> Path:
                                out / "report", log=StderrLog("sasmi fit: [5/5 report]"),
                                statistics=functools.partial(median_statistics, size=plan.size))
     return rep.write_report(out / "report", result, title="sasmi fit: realism report")
+
+
+def sasgan_settings(recipe: str) -> dict:
+    """The SasganRun fields a recipe sets, as config values; a SasmiError names an unknown key."""
+    import tomllib
+    from dataclasses import fields, is_dataclass
+
+    from gan.kinds.sasgan import SasganRun
+    from gan.run import config_from_dict
+
+    path = Path(recipe)
+    if not path.is_file():
+        path = recipes_folder() / f"{recipe}.toml"
+        if not path.is_file():
+            names = ", ".join(sorted(p.stem for p in recipes_folder().glob("*.toml")))
+            raise SasmiError(f"--gan {recipe}: not a TOML file nor a shipped recipe ({names})")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise SasmiError(f"--gan {path}: cannot read ({e})") from None
+    defaults = SasganRun()
+    for key, value in raw.items():
+        if not hasattr(defaults, key):
+            raise SasmiError(f"--gan {path}: {key}: not a SAS GAN setting (see docs/gan.md)")
+        nested = getattr(defaults, key)
+        if is_dataclass(nested) and (not isinstance(value, dict)
+                                     or set(value) - {f.name for f in fields(nested)}):
+            raise SasmiError(f"--gan {path}: [{key}] holds a key that is not a setting of it")
+    cfg = config_from_dict(SasganRun, raw, str(path)).validate()
+    return {key: getattr(cfg, key) for key in raw}
+
+
+def recipes_folder() -> Path:
+    """The shipped SAS GAN recipes: package data of the gan package (gan/recipes/*.toml)."""
+    import gan
+
+    return Path(gan.__file__).resolve().parent / "recipes"
 
 
 def with_defaults(plan: FitPlan) -> FitPlan:

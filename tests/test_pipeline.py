@@ -42,3 +42,19 @@ def test_fit_runs_every_stage_then_resumes_without_retraining(tmp_path, capsys):
 
     assert main([*argv[:-2], "--preset", "seafloor_only"]) == 2  # another plan into the same folder
     assert "only --minutes may change" in capsys.readouterr().err
+
+
+def test_fit_reuses_a_phi_run_and_refuses_a_bad_recipe(tmp_path, capsys):
+    real = _chips(tmp_path / "real", 12, 0)
+    first = tmp_path / "first"
+    base = ["fit", "--real", str(real), "--minutes", "0.02", "--size", "32", "--renders", "8", "--gan", "baseline"]
+    assert main([*base, "--out", str(first)]) == 0
+    second = tmp_path / "second"
+    assert main([*base, "--out", str(second), "--phi", str(first / "phi")]) == 0
+    assert not (second / "phi").exists() and (second / "report" / "metrics.json").is_file()
+
+    recipe = tmp_path / "recipe.toml"
+    recipe.write_text("mask_wieght = 3\n")
+    assert main([*base, "--out", str(tmp_path / "third"), "--gan", str(recipe)]) == 2
+    err = capsys.readouterr().err
+    assert "mask_wieght: not a SAS GAN setting" in err and not (tmp_path / "third").exists()

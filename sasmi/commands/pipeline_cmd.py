@@ -23,6 +23,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", default="cylinder_chip", help="scene preset: a TOML file or a shipped preset's name")
     p.add_argument("--renders", type=int, default=400, help="chips rendered for the GAN and the report")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--gan", default="small_data",
+                   help="SAS GAN settings: a shipped recipe (small_data, baseline) or a TOML file of them")
+    p.add_argument("--phi", metavar="RUN", default="",
+                   help="an autoencoder run to use instead of training one (e.g. one φ for several recipes)")
     add_device(p)
     add_threads(p)
     p.set_defaults(run=run)
@@ -39,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)
     plan = with_defaults(FitPlan(real=args.real, out=args.out, phi_real=args.phi_real, validation=args.validation,
                                  minutes=args.minutes, size=args.size, preset=args.preset, renders=args.renders,
-                                 seed=args.seed))
+                                 seed=args.seed, gan=args.gan, phi=args.phi))
     path = fit(plan, resolve_device(args.device))
     print(path)
     return 0
