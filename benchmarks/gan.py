@@ -24,6 +24,10 @@ from pathlib import Path
 # run as a script, this file's folder comes first on sys.path and its name would shadow the gan package
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
+# as the sasmi commands do (sasmi/commands/common.py): idle OpenMP threads sleep, not spin;
+# OMP_WAIT_POLICY=ACTIVE in the environment measures the spinning default
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
