@@ -3,15 +3,18 @@
     .venv/bin/python benchmarks/gan.py                       # CPU, and CUDA when present
     .venv/bin/python benchmarks/gan.py --nets small paper --train-size 128 --train-steps 20
 
-Training steps/s come from the real training functions on a temporary folder of random
+Training steps/s come from the real training loop on a temporary folder of random
 images, timed as the difference between an N+2-step and a 2-step run, so start-up
-(reading data, TensorBoard) is excluded; one SAS GAN or DCGAN step is n_critic = 5
+(reading data, TensorBoard) is excluded. Beside the wall-clock rate it prints the CPU
+seconds per step (all threads): on a machine that other jobs share, the wall clock
+measures the load, while CPU time at 1 thread (--threads 1) measures the work; one SAS GAN or DCGAN step is n_critic = 5
 critic updates and one generator update. The paper net at 256² on a CPU takes
 minutes; it runs on CUDA by default and on the CPU only when asked for.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -20,6 +23,10 @@ from pathlib import Path
 
 # run as a script, this file's folder comes first on sys.path and its name would shadow the gan package
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+
+# as the sasmi commands do (sasmi/commands/common.py): idle OpenMP threads sleep, not spin;
+# OMP_WAIT_POLICY=ACTIVE in the environment measures the spinning default
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
@@ -52,24 +59,27 @@ def inference_ms(net: str, device: torch.device, batch: int, size: int = 256, re
     return (time.perf_counter() - start) / repeats / batch * 1000
 
 
-def training_steps_per_s(kind, net: str, device: torch.device, size: int, steps: int, data: Path) -> float:
+def training_steps_per_s(kind, net: str, device: torch.device, size: int, steps: int,
+                         data: Path) -> tuple[float, float]:
+    """(steps/s by the wall clock, CPU seconds per step over all threads)."""
     inputs = {"real": data / "real"}
     if kind is SASGAN:
         inputs |= {"renders": data / "renders", "phi": data / f"ae{size}"}
 
-    def run(n: int) -> float:
+    def run(n: int) -> tuple[float, float]:
         cfg = replace(kind.config(), steps=n, size=size, sample_every=10 ** 7, checkpoint_every=10 ** 7)
         if kind is SASGAN:
             cfg = replace(cfg, generator=GENERATOR_NETS[net], critic=CRITIC_NETS[net])
         if kind is DCGAN:
             cfg = replace(cfg, dcgan=DCGAN_NETS[net], critic=CRITIC_NETS[net], final_samples=1)
         out = Path(tempfile.mkdtemp(dir=data))
-        start = time.perf_counter()
+        wall, cpu = time.perf_counter(), time.process_time()
         train(kind, cfg, out, inputs, device)
         sync(device)
-        return time.perf_counter() - start
+        return time.perf_counter() - wall, time.process_time() - cpu
 
-    return steps / (run(steps + 2) - run(2))
+    (wall_n, cpu_n), (wall_2, cpu_2) = run(steps + 2), run(2)
+    return steps / (wall_n - wall_2), (cpu_n - cpu_2) / steps
 
 
 def main() -> None:
@@ -79,7 +89,13 @@ def main() -> None:
                         help="network sizes (default: small on CPU, small and paper on CUDA)")
     parser.add_argument("--train-size", type=int, default=128, help="training image size (default 128, the chips)")
     parser.add_argument("--train-steps", type=int, default=10, help="timed training steps per kind (default 10)")
+    parser.add_argument("--kinds", nargs="+", choices=("autoencoder", "sasgan", "dcgan"),
+                        default=["autoencoder", "sasgan", "dcgan"], help="run kinds to time (default all)")
+    parser.add_argument("--threads", type=int, help="torch CPU threads (default torch's choice)")
+    parser.add_argument("--no-inference", action="store_true", help="time training only")
     args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
     devices = args.devices or ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -96,13 +112,16 @@ def main() -> None:
             device = torch.device(name)
             label = torch.cuda.get_device_name(device) if device.type == "cuda" else "CPU"
             for net in args.nets or (["small"] if device.type == "cpu" else ["small", "paper"]):
-                for batch in (1, 16):
+                for batch in () if args.no_inference else (1, 16):
                     ms = inference_ms(net, device, batch)
                     print(f"{label:>12}  generator {net:<5} 256² batch {batch:>2}: {ms:8.2f} ms/image")
                 for kind in (AUTOENCODER, SASGAN, DCGAN)[net != "small":]:  # the autoencoder has one size
-                    rate = training_steps_per_s(kind, net, device, args.train_size, args.train_steps, data)
+                    if kind.name not in args.kinds:
+                        continue
+                    rate, cpu = training_steps_per_s(kind, net, device, args.train_size, args.train_steps, data)
                     print(f"{label:>12}  train {kind.name:<11} {net:<5} {args.train_size}² batch "
-                          f"{kind.config().batch}: {rate:6.2f} steps/s")
+                          f"{kind.config().batch}: {rate:6.2f} steps/s, {cpu:6.2f} CPU s/step "
+                          f"(load {os.getloadavg()[0]:.1f})")
 
 
 if __name__ == "__main__":

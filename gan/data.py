@@ -70,7 +70,9 @@ def _read_mask(folder: Path, image_path: Path, shape: tuple[int, int]) -> torch.
     try:
         path = (folder / "masks" / image_path.relative_to(folder / "images")).with_suffix(".png")
         with Image.open(path) as im:
-            mask = torch.from_numpy(np.asarray(im.convert("L"), dtype=np.uint8).copy())[None, None]
+            if im.mode not in ("P", "L"):  # palette PNGs (as sasmi writes them) hold the ids as indices
+                raise ValueError(f"a mask must be a palette or 8-bit gray PNG, not mode {im.mode}")
+            mask = torch.from_numpy(np.asarray(im, dtype=np.uint8).copy())[None, None]
     except (OSError, ValueError) as e:
         raise SasmiError(f"{folder / 'masks'}: cannot read the mask of {image_path.name} ({e})") from None
     return F.interpolate(mask.float(), size=tuple(shape), mode="nearest")[0].to(torch.uint8)

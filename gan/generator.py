@@ -3,7 +3,9 @@
 7×7 conv, two stride-2 convs down, `blocks` residual blocks at 4×width channels, two
 [nearest ×2 → 3×3 conv] stages up (transposed convs leave checkerboard patterns that a
 critic learns to see), 7×7 conv, tanh. Instance norm, as in CycleGAN's version of the
-same net: batches of 4 are too small for batch statistics. Reflection padding keeps the
+same net: batches of 4 are too small for batch statistics. It is written as GroupNorm with
+one group per channel: the same maths and the same weights (`weight`, `bias` per
+channel), 2-4× faster than InstanceNorm2d on a CPU (docs/gan.md, Speed). Reflection padding keeps the
 borders free of a dark frame. Fully convolutional: any size that is a multiple of 4.
 """
 from __future__ import annotations
@@ -28,9 +30,13 @@ class GeneratorConfig:
 GENERATOR_NETS = {"small": GeneratorConfig(16, 4), "paper": GeneratorConfig(64, 9)}
 
 
+def instance_norm(channels: int) -> nn.Module:
+    return nn.GroupNorm(channels, channels)
+
+
 def _conv_norm_relu(c_in: int, c_out: int, kernel: int, stride: int = 1) -> list[nn.Module]:
     return [nn.Conv2d(c_in, c_out, kernel, stride, padding=kernel // 2, padding_mode="reflect"),
-            nn.InstanceNorm2d(c_out, affine=True), nn.ReLU()]
+            instance_norm(c_out), nn.ReLU()]
 
 
 class ResidualBlock(nn.Module):
@@ -38,7 +44,7 @@ class ResidualBlock(nn.Module):
         super().__init__()
         self.body = nn.Sequential(*_conv_norm_relu(c, c, 3),
                                   nn.Conv2d(c, c, 3, padding=1, padding_mode="reflect"),
-                                  nn.InstanceNorm2d(c, affine=True))
+                                  instance_norm(c))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return x + self.body(x)

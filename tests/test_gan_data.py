@@ -79,3 +79,18 @@ def test_empty_or_unusable_folder_is_one_error(tmp_path):
         ImageSet(tmp_path / "missing", 32)
     with pytest.raises(SasmiError, match="multiple of 16"):
         ImageSet(tmp_path, 40)
+
+
+def test_masks_are_read_as_ids_from_palette_pngs(tmp_path):
+    ids = np.zeros((32, 32), np.uint8)
+    ids[10:14, 10:14], ids[10:14, 16:24] = 1, 2
+    _png(tmp_path / "images" / "000000.png", np.full((32, 32), 0.4))
+    (tmp_path / "masks").mkdir()
+    palette = Image.fromarray(ids, mode="P")
+    palette.putpalette([40, 40, 40, 230, 60, 40, 40, 110, 230] + [0] * 759)  # colours, as sasmi draws them
+    palette.save(tmp_path / "masks" / "000000.png")
+    images = ImageSet(tmp_path, 16, masks=True)
+    assert images.masks[0].shape == (1, 16, 16)
+    assert set(images.masks[0].unique().tolist()) == {0, 1, 2}
+    x, masks = Batches(images, batch=2, seed=0).next_with_masks()
+    assert masks.shape == (2, 1, 16, 16) and masks.dtype == torch.uint8

@@ -189,3 +189,18 @@ def test_config_travels_inside_the_checkpoint(runs):
     assert ckpt["kind"] == "sasgan" and ckpt["config"]["generator"] == {"width": 4, "blocks": 1}
     assert set(ckpt["inputs"]) == {"real", "renders", "phi"}
     assert pickle.loads(pickle.dumps(ckpt["config"])) == ckpt["config"]  # plain types only
+
+
+def test_checkpoints_from_before_the_config_moved_inside_still_load(tmp_path, runs):
+    from gan.generator import load_generator
+
+    run = tmp_path / "old"
+    (run / "checkpoints").mkdir(parents=True)
+    ckpt = torch.load(runs["gan"] / "checkpoints" / "last.pt", weights_only=True)
+    old = {k: ckpt[k] for k in ("step", "torch_rng", "state")}  # the old format: no kind, no config
+    old["state"] = {k: v for k, v in old["state"].items() if k != "generator_ema"}
+    torch.save(old, run / "checkpoints" / "last.pt")
+    (run / "config.json").write_text((runs["gan"] / "config.json").read_text())
+    generator = load_generator(run)
+    assert generator.image_size == 32
+    assert all(torch.equal(p, ckpt["state"]["generator"][k]) for k, p in generator.state_dict().items())

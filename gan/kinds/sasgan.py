@@ -85,7 +85,9 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
         render, masks = render_batch()
         fake = generator(render)  # (B, 1, S, S) in [-1, 1]
         adversarial = adversarial_loss(cfg, critic(view(fake)))
-        constraint = phi_loss(encoder(render), encoder(fake), cfg.phi_margin)
+        with torch.no_grad():
+            phi_render = encoder(render)  # (B, 1024): a target, no gradient needed
+        constraint = phi_loss(phi_render, encoder(fake), cfg.phi_margin)
         loss = adversarial + cfg.phi_weight * constraint
         logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
         if masks is not None:

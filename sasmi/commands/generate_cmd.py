@@ -5,7 +5,7 @@ import argparse
 import hashlib
 from pathlib import Path
 
-from sasmi.commands.common import add_device, add_generator, add_threads, apply_threads, check_batch, resolve_device
+from sasmi.commands.common import add_device, add_generator, add_threads, check_batch, prepare_torch, resolve_device
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -28,13 +28,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    prepare_torch(args.threads)  # before torch is imported
     from gan.generator import load_generator
     from gan.translate import translate
     from sasmi.dataset import RenderJob, render_set
     from sasmi.scene import load_preset
 
     check_batch(args.batch)
-    apply_threads(args.threads)
     job = RenderJob(preset=load_preset(args.preset), out=args.out, count=args.count, seed=args.seed,
                     size=args.size, spp=args.spp, workers=args.workers).validate()
     generator = load_generator(args.generator, resolve_device(args.device), args.checkpoint)

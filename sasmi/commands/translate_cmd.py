@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sasmi.commands.common import add_device, add_generator, add_threads, apply_threads, check_batch, resolve_device
+from sasmi.commands.common import add_device, add_generator, add_threads, check_batch, prepare_torch, resolve_device
 
 
 def add_parser(subparsers) -> None:
@@ -21,11 +21,11 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    prepare_torch(args.threads)  # before torch is imported
     from gan.generator import load_generator
     from gan.translate import translate_folder
 
     check_batch(args.batch)
-    apply_threads(args.threads)
     generator = load_generator(args.generator, resolve_device(args.device), args.checkpoint)
     n = translate_folder(generator, args.in_dir, args.out, args.batch,
                          provenance={"generator": str(Path(args.generator).resolve()),
