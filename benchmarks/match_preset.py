@@ -22,10 +22,21 @@ sys.path.insert(0, str(REPO))
 
 
 def render(preset: Path, out: Path, count: int, size: int, spp: int, seed: int) -> Path:
+    """Render (or resume) the set; prints the wall time per chip rendered by this call."""
+    import time
+
     from sasmi.dataset import RenderJob, render_set
+    from sasmi.images import list_images
     from sasmi.scene import load_preset
 
-    return render_set(RenderJob(preset=load_preset(preset), out=out, count=count, seed=seed, size=size, spp=spp))
+    before = len(list_images(out)) if out.is_dir() else 0
+    start = time.perf_counter()
+    path = render_set(RenderJob(preset=load_preset(preset), out=out, count=count, seed=seed, size=size, spp=spp))
+    if count > before:
+        ms = (time.perf_counter() - start) / (count - before) * 1000
+        print(f"preset={preset} rendered={count - before} size={size} spp={spp} ms_per_chip={ms:.0f} "
+              "(wall time, process start and kernel compile included)")
+    return path
 
 
 def side_by_side(folders: list[Path], names: list[str], path: Path, size: int, columns: int) -> None:

@@ -9,13 +9,14 @@ Target positions are given relative to the chip centre.
 A preset value may be a plain value or a distribution, `{uniform = [lo, hi]}`,
 `{normal = [mean, std]}` or `{choice = [a, b, ...]}`, so one preset describes a family
 of scenes; `Preset.sample(seed, index)` draws scene `index` from a generator seeded by
-(seed, index) alone, so any scene can be re-made without the ones before it.
+(seed, index) alone, so any scene can be re-made without the ones before it. With a
+top-level `targets_per_chip`, the [[targets]] tables are kinds of target drawn by `weight`
+(see `TargetKinds`). Value checks and draws live in sasmi/scene_values.py.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
-import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,8 +26,10 @@ import numpy as np
 
 from sasmi import limits
 from sasmi.errors import SasmiError
+from sasmi.scene_values import (check_mesh_file, check_table, check_value, draw, read_small_file, sample_table,
+                                target_kinds)
 
-SHAPES = ("cylinder", "sphere", "cone", "mesh")
+SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "mesh")
 BACKSCATTER = ("lambert", "lambert2")
 
 
@@ -90,9 +93,13 @@ class Target:
     y: float = _spec(0.0, None, "", "m from the chip centre along track")
     yaw: float = _spec(0.0, None, "", "deg; axis angle from +x (range) towards +y (along-track)")
     burial: float = _spec(0.0, _nonneg, ">= 0", "m of the target's height below the local seafloor")
-    length: float = _spec(2.0, _positive, "> 0", "m; cylinder length, cone height")
-    radius: float = _spec(0.3, _positive, "> 0", "m; cylinder/sphere radius, cone base radius")
+    length: float = _spec(2.0, _positive, "> 0", "m; cylinder length, cone height, box length (along its axis)")
+    radius: float = _spec(0.3, _positive, "> 0", "m; cylinder/sphere radius, cone base radius, torus major radius "
+                          "(ring centre to tube centre)")
     radius_top: float = _spec(0.1, _nonneg, ">= 0", "m; top radius of the truncated cone")
+    width: float = _spec(1.0, _positive, "> 0", "m; box width (across its axis)")
+    height: float = _spec(0.5, _positive, "> 0", "m; box height")
+    tube_radius: float = _spec(0.15, _positive, "> 0", "m; torus tube radius (a tyre lying flat: its height is twice this)")
     mesh: str = _spec("", None, "", "OBJ/STL/PLY path (shape = 'mesh'), relative to the preset")
     scale: float = _spec(1.0, _positive, "> 0", "scale applied to a mesh file")
     albedo: float = _spec(0.9, _unit, "in [0, 1]")
@@ -131,8 +138,9 @@ class Scene:
     post: Post = Post()
     seed: int = 0  # drives the heightfield, rocks, speckle and the sampler
 
-    def validate(self) -> "Scene":
-        """Cross-field checks; raises SasmiError naming the field."""
+    def validate(self, names: tuple[str, ...] = ()) -> "Scene":
+        """Cross-field checks; raises SasmiError naming the field. `names[i]`: the preset table of target i
+        (targets drawn by kind come from the table of their kind); default targets[i]."""
         s = self.sonar
         if s.near_range + s.chip_size > s.max_range:
             raise SasmiError(f"sonar.near_range: chip far edge {s.near_range + s.chip_size:g} m exceeds "
@@ -145,36 +153,28 @@ class Scene:
                              f"reaches the array at altitude {altitude}")
         half = s.chip_size / 2
         for i, t in enumerate(self.targets):
+            where = names[i] if i < len(names) else f"targets[{i}]"
             top = (target_height(t) or 0.0) - t.burial
             if top >= s.array_altitude:
-                raise SasmiError(f"targets[{i}]: rises {top:g} m above the floor, to the array at altitude {altitude}")
+                raise SasmiError(f"{where}: rises {top:g} m above the floor, to the array at altitude {altitude}")
             if not (-half < t.x < half):
-                raise SasmiError(f"targets[{i}].x: {t.x:g} m lies outside the chip (allowed: -{half:g} < x < {half:g})")
+                raise SasmiError(f"{where}.x: {t.x:g} m lies outside the chip (allowed: -{half:g} < x < {half:g})")
             if not (-half < t.y < half):
-                raise SasmiError(f"targets[{i}].y: {t.y:g} m lies outside the chip (allowed: -{half:g} < y < {half:g})")
+                raise SasmiError(f"{where}.y: {t.y:g} m lies outside the chip (allowed: -{half:g} < y < {half:g})")
             if t.shape == "mesh" and not t.mesh:
-                raise SasmiError(f"targets[{i}].mesh: a file path is required when shape = 'mesh'")
+                raise SasmiError(f"{where}.mesh: a file path is required when shape = 'mesh'")
             if t.shape == "mesh":
-                _check_mesh_file(Path(t.mesh), f"targets[{i}].mesh")
+                check_mesh_file(Path(t.mesh), f"{where}.mesh")
             height = target_height(t)
             if height is not None and t.burial >= height:
-                raise SasmiError(f"targets[{i}].burial: {t.burial:g} m buries the whole target "
+                raise SasmiError(f"{where}.burial: {t.burial:g} m buries the whole target "
                                  f"(allowed: 0 <= burial < height {height:g} m)")
             if t.shape == "cone" and t.radius_top > t.radius:
-                raise SasmiError(f"targets[{i}].radius_top: {t.radius_top:g} exceeds radius {t.radius:g}")
+                raise SasmiError(f"{where}.radius_top: {t.radius_top:g} exceeds radius {t.radius:g}")
+            if t.shape == "torus" and t.tube_radius >= t.radius:
+                raise SasmiError(f"{where}.tube_radius: {t.tube_radius:g} m closes the ring "
+                                 f"(allowed: < radius {t.radius:g} m)")
         return self
-
-
-def _check_mesh_file(path: Path, where: str) -> None:
-    """A mesh must be a regular file of bounded size: trimesh would read /dev/zero for ever."""
-    try:
-        st = path.stat()
-    except (OSError, ValueError):  # ValueError: a NUL character in the path
-        raise SasmiError(f"{where}: {str(path)!r}: mesh file not found") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise SasmiError(f"{where}: {path}: not a regular file (expected an OBJ, STL or PLY file)")
-    if st.st_size > limits.MESH_MAX_BYTES:
-        raise SasmiError(f"{where}: {path}: {st.st_size} bytes (allowed: <= {limits.MESH_MAX_BYTES} bytes)")
 
 
 def target_height(t: Target) -> float | None:
@@ -183,6 +183,10 @@ def target_height(t: Target) -> float | None:
         return 2 * t.radius
     if t.shape == "cone":
         return t.length
+    if t.shape == "box":
+        return t.height
+    if t.shape == "torus":
+        return 2 * t.tube_radius
     return None
 
 
@@ -190,117 +194,18 @@ def target_height(t: Target) -> float | None:
 # Presets: TOML with distributions
 # ---------------------------------------------------------------------------------------
 
+@dataclass(frozen=True)
+class TargetKinds:
+    """Targets drawn per chip: with `targets_per_chip` set, every [[targets]] table is a kind of target
+    (its own shapes and size ranges), and each of a chip's targets picks a kind with probability
+    weight / (sum of weights). Without it, every table is one target of every chip."""
+    targets_per_chip: int = _spec(1, _nonneg, ">= 0", "targets per chip, each drawn from the [[targets]] tables "
+                                  "by their weight")
+    weight: float = _spec(1.0, _nonneg, ">= 0", "a [[targets]] table's share of the draws (with targets_per_chip)")
+
+
 SECTIONS = {"sonar": Sonar, "seafloor": Seafloor, "post": Post}
-TOP_KEYS = set(SECTIONS) | {"targets", "target_grid", "description"}
-
-
-def _is_distribution(v: Any) -> bool:
-    return isinstance(v, dict)
-
-
-def _section(where: str) -> str:
-    """"targets[3].yaw" -> "targets", "target_grid.target.yaw" -> "targets": the key of limits.FIELDS."""
-    head = where.split(".")[0].split("[")[0]
-    return "targets" if head == "targets" or where.startswith("target_grid.target") else head
-
-
-def _check_value(cls: type, name: str, value: Any, where: str) -> Any:
-    f = {f.name: f for f in dataclasses.fields(cls)}[name]
-    allowed = f.metadata.get("allowed") or ""
-    expected = type(f.default)
-    if expected is float and isinstance(value, int) and not isinstance(value, bool):
-        if abs(value) > 2**53:  # TOML integers are unbounded here; float() of a huge one overflows
-            raise SasmiError(f"{where}: {value} is far too large (allowed: {allowed or 'a finite number'})")
-        value = float(value)
-    if expected is int and isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if type(value) is not expected:
-        raise SasmiError(f"{where}: expected {expected.__name__}, got {type(value).__name__} {value!r}"[:300])
-    if expected is str and len(value) > limits.MAX_STRING:
-        raise SasmiError(f"{where}: a string of {len(value)} characters (allowed: <= {limits.MAX_STRING})")
-    if expected is float and not math.isfinite(value):
-        raise SasmiError(f"{where}: {value!r} is not allowed (allowed: a finite number{', ' if allowed else ''}"
-                         f"{allowed})")
-    check = f.metadata.get("check")
-    if check is not None and not check(value):
-        raise SasmiError(f"{where}: {value!r} is not allowed (allowed: {allowed})")
-    if expected in (int, float):
-        limits.field_range(_section(where), name).check(value, where)  # the stated bound and its reason
-    return value
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _check_distribution(cls: type, name: str, dist: dict, where: str) -> None:
-    if len(dist) != 1 or next(iter(dist)) not in ("uniform", "normal", "choice"):
-        raise SasmiError(f"{where}: a distribution is one of {{uniform = [lo, hi]}}, {{normal = [mean, std]}}, "
-                         f"{{choice = [...]}}; got {dist!r}"[:300])
-    kind, args = next(iter(dist.items()))
-    if not isinstance(args, list) or not args:
-        raise SasmiError(f"{where}.{kind}: expected a non-empty list")
-    if kind == "choice":
-        if len(args) > limits.MAX_CHOICES:
-            raise SasmiError(f"{where}.choice: {len(args)} entries (allowed: <= {limits.MAX_CHOICES})")
-        for v in args:
-            _check_value(cls, name, v, where)
-        return
-    if len(args) != 2 or not all(_is_number(a) for a in args):
-        raise SasmiError(f"{where}.{kind}: expected two numbers, got {args!r}"[:300])
-    if not all(math.isfinite(a) for a in args):
-        raise SasmiError(f"{where}.{kind}: {args!r} holds a value that is not a finite number")
-    if kind == "uniform":
-        if args[0] > args[1]:
-            raise SasmiError(f"{where}.uniform: lower bound {args[0]} exceeds upper bound {args[1]}")
-        for v in args:
-            _check_value(cls, name, float(v) if isinstance(cls.__dataclass_fields__[name].default, float) else v, where)
-    else:
-        if args[1] < 0:
-            raise SasmiError(f"{where}.normal: std {args[1]} is negative")
-        # each draw is checked again; these bounds only stop draws that could never be in range
-        r = limits.field_range(_section(where), name)
-        r.check(args[0], f"{where}.normal mean")
-        if r.lo is not None and r.hi is not None and args[1] > r.hi - r.lo:
-            raise SasmiError(f"{where}.normal: std {args[1]:g} exceeds the whole allowed range "
-                             f"(allowed: {r.allowed()})")
-
-
-def _check_table(cls: type, table: Any, where: str, skip: tuple[str, ...] = ()) -> None:
-    if not isinstance(table, dict):
-        raise SasmiError(f"{where}: expected a table, got {type(table).__name__}")
-    names = [f.name for f in dataclasses.fields(cls) if f.name not in skip]
-    for key, value in table.items():
-        if key not in names:
-            raise SasmiError(f"{where}.{key}: unknown key (allowed: {', '.join(names)})")
-        if _is_distribution(value):
-            _check_distribution(cls, key, value, f"{where}.{key}")
-        else:
-            _check_value(cls, key, value, f"{where}.{key}")
-
-
-def _draw(value: Any, rng: np.random.Generator) -> Any:
-    if not _is_distribution(value):
-        return value
-    kind, args = next(iter(value.items()))
-    if kind == "uniform":
-        return float(rng.uniform(args[0], args[1]))
-    if kind == "normal":
-        return float(rng.normal(args[0], args[1]))
-    return args[int(rng.integers(len(args)))]
-
-
-def _sample_table(cls: type, table: dict, rng: np.random.Generator, where: str, **fixed: Any) -> Any:
-    # Draw every distribution in the dataclass's field order so the draw sequence does not
-    # depend on the order keys were written in the preset.
-    values = dict(fixed)
-    for f in dataclasses.fields(cls):
-        if f.name in table:
-            drawn = _draw(table[f.name], rng)
-            if type(f.default) is int and isinstance(drawn, float):
-                drawn = int(round(drawn))  # uniform/normal over an integer field draws integers
-            values[f.name] = _check_value(cls, f.name, drawn, f"{where}.{f.name}")
-    return cls(**values)
+TOP_KEYS = set(SECTIONS) | {"targets", "target_grid", "targets_per_chip", "description"}
 
 
 @dataclass(frozen=True)
@@ -316,14 +221,14 @@ class Preset:
                 raise SasmiError(f"{key}: unknown section (allowed: {', '.join(sorted(TOP_KEYS))})")
         for name, section in SECTIONS.items():
             if name in raw:
-                _check_table(section, raw[name], name)
-        targets = raw.get("targets", [])
-        if not isinstance(targets, list):
+                check_table(section, raw[name], name)
+        if not isinstance(raw.get("targets", []), list):
             raise SasmiError("targets: expected an array of tables ([[targets]])")
+        targets, weights = target_kinds(raw, TargetKinds)
         if len(targets) > limits.MAX_TARGETS:
             raise SasmiError(f"targets: {len(targets)} targets (allowed: <= {limits.MAX_TARGETS})")
         for i, t in enumerate(targets):
-            _check_table(Target, t, f"targets[{i}]")
+            check_table(Target, t, f"targets[{i}]")
         if "description" in raw and not isinstance(raw["description"], str):
             raise SasmiError(f"description: expected a string, got {type(raw['description']).__name__}")
         if "target_grid" in raw:
@@ -331,10 +236,15 @@ class Preset:
                 raise SasmiError(f"target_grid: expected a table, got {type(raw['target_grid']).__name__}")
             grid = dict(raw["target_grid"])
             target = grid.pop("target", {})
-            _check_table(TargetGrid, grid, "target_grid")
-            _check_table(Target, target, "target_grid.target", skip=("x", "y"))
+            check_table(TargetGrid, grid, "target_grid")
+            check_table(Target, target, "target_grid.target", skip=("x", "y"))
         preset = cls(raw=raw, path=path)
-        preset.sample(0, 0)  # cross-field checks on one draw, so a broken preset fails at load
+        scene = preset.sample(0, 0)  # cross-field checks on one draw, so a broken preset fails at load
+        if weights is not None:  # and on one draw of every kind, which one chip may not pick
+            rng = np.random.default_rng(0)
+            for i, t in enumerate(targets):
+                kind = sample_table(Target, t, rng, f"targets[{i}]")
+                dataclasses.replace(scene, targets=(kind,)).validate(names=(f"targets[{i}]",))
         return preset
 
     def resolve_mesh(self, mesh: str) -> Path:
@@ -345,21 +255,33 @@ class Preset:
 
     def sample(self, seed: int, index: int) -> Scene:
         rng = np.random.default_rng([seed, index])
-        sonar = _sample_table(Sonar, self.raw.get("sonar", {}), rng, "sonar")
-        seafloor = _sample_table(Seafloor, self.raw.get("seafloor", {}), rng, "seafloor")
-        post = _sample_table(Post, self.raw.get("post", {}), rng, "post")
-        targets = [_sample_table(Target, t, rng, f"targets[{i}]") for i, t in enumerate(self.raw.get("targets", []))]
+        sonar = sample_table(Sonar, self.raw.get("sonar", {}), rng, "sonar")
+        seafloor = sample_table(Seafloor, self.raw.get("seafloor", {}), rng, "seafloor")
+        post = sample_table(Post, self.raw.get("post", {}), rng, "post")
+        tables, weights = target_kinds(self.raw, TargetKinds)
+        if weights is None:
+            picks = list(range(len(tables)))
+        else:
+            drawn = draw(self.raw["targets_per_chip"], rng)
+            count = check_value(TargetKinds, "targets_per_chip", int(round(drawn)), "targets_per_chip")
+            if count > limits.MAX_TARGETS:
+                raise SasmiError(f"targets_per_chip: {count} (allowed: <= {limits.MAX_TARGETS})")
+            picks = [int(k) for k in rng.choice(len(tables), size=count, p=weights)]
+        targets = [sample_table(Target, tables[k], rng, f"targets[{k}]") for k in picks]
+        names = tuple(f"targets[{k}]" for k in picks)
         if "target_grid" in self.raw:
             targets += self._grid_targets(sonar, rng, len(targets))
         targets = [dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" and t.mesh else t
                    for t in targets]
         scene_seed = int(rng.integers(2**31 - 1))
-        return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed).validate()
+        names += tuple(f"targets[{k}]" for k in range(len(names), len(targets)))  # grid targets
+        return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed
+                     ).validate(names)
 
     def _grid_targets(self, sonar: Sonar, rng: np.random.Generator, first: int) -> list[Target]:
         grid_raw = dict(self.raw["target_grid"])
         target_raw = grid_raw.pop("target", {})
-        grid = _sample_table(TargetGrid, grid_raw, rng, "target_grid")
+        grid = sample_table(TargetGrid, grid_raw, rng, "target_grid")
         half = sonar.chip_size / 2
         count = int(math.floor(sonar.chip_size / grid.spacing))
         if count < 1:
@@ -377,7 +299,7 @@ class Preset:
                 jx, jy = rng.uniform(-grid.jitter, grid.jitter, size=2)
                 xy = {"x": float(np.clip(x + jx, -half * 0.98, half * 0.98)),
                       "y": float(np.clip(y + jy, -half * 0.98, half * 0.98))}
-                targets.append(_sample_table(Target, target_raw, rng, f"targets[{k}]", **xy))
+                targets.append(sample_table(Target, target_raw, rng, f"targets[{k}]", **xy))
         return targets
 
 
@@ -397,30 +319,6 @@ def _find_preset(path: Path) -> Path:
         return shipped
     names = ", ".join(shipped_presets())
     raise SasmiError(f"{path}: preset not found (a TOML file, or a shipped preset: {names})")
-
-
-def read_small_file(path: Path, max_bytes: int, what: str) -> bytes:
-    """The bytes of a regular file of at most `max_bytes`; checked before reading, so /dev/zero or a
-    FIFO is refused instead of read for ever."""
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        raise SasmiError(f"{path}: {what} not found") from None
-    except OSError as e:
-        raise SasmiError(f"{path}: cannot read {what} ({e.strerror or e})") from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-        raise SasmiError(f"{path}: {kind} (expected a {what} file)")
-    if st.st_size > max_bytes:
-        raise SasmiError(f"{path}: {st.st_size} bytes is too large for a {what} (allowed: <= {max_bytes} bytes)")
-    try:
-        with open(path, "rb") as f:
-            data = f.read(max_bytes + 1)
-    except OSError as e:
-        raise SasmiError(f"{path}: cannot read {what} ({e.strerror or e})") from None
-    if len(data) > max_bytes:  # grew since stat
-        raise SasmiError(f"{path}: too large for a {what} (allowed: <= {max_bytes} bytes)")
-    return data
 
 
 def load_preset(path: str | Path) -> Preset:

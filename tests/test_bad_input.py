@@ -181,7 +181,7 @@ PRESETS = NON_FINITE + [
     ("[sonar]\nmax_range = [1, 2]\n", "sonar.max_range"),
     ("[sonar]\nmax_range = 1979-05-27\n", "sonar.max_range"),
     ("description = 5\n", "description"),
-    ('[[targets]]\nshape = "torus"\n', "targets[0].shape"),
+    ('[[targets]]\nshape = "donut"\n', "targets[0].shape"),
     # distributions
     ("[seafloor]\nalbedo = {uniform = [nan, 0.5]}\n", "seafloor.albedo"),
     ("[seafloor]\nalbedo = {normal = [0.5, inf]}\n", "seafloor.albedo"),

@@ -38,7 +38,21 @@ def write(tmp_path, text: str):
     ("[seafloor]\nalbedo = {uniform = [0.5, 0.2]}\n", "seafloor.albedo.uniform: lower bound"),
     ("[seafloor]\nalbedo = {gauss = [0.5, 0.2]}\n", "seafloor.albedo: a distribution is one of"),
     ("[seafloor]\nalbedo = 1.5\n", "seafloor.albedo: 1.5 is not allowed (allowed: in [0, 1])"),
-    ('[[targets]]\nshape = "torus"\n', "targets[0].shape: 'torus' is not allowed"),
+    ('[[targets]]\nshape = "donut"\n', "targets[0].shape: 'donut' is not allowed"),
+    ('[[targets]]\nshape = "torus"\nradius = 0.2\ntube_radius = 0.2\n', "targets[0].tube_radius: 0.2 m closes the ring"),
+    ('[[targets]]\nshape = "box"\nheight = 0.4\nburial = 0.4\n', "targets[0].burial: 0.4 m buries the whole target"),
+    # target kinds
+    ('targets_per_chip = 1\n', "targets_per_chip: no [[targets]] tables to draw targets from"),
+    ('targets_per_chip = -1\n[[targets]]\n', "targets_per_chip: -1 is not allowed (allowed: >= 0)"),
+    ('targets_per_chip = "two"\n[[targets]]\n', "targets_per_chip: expected int"),
+    ('targets_per_chip = 1\n[[targets]]\nweight = -2\n', "targets[0].weight: -2.0 is not allowed (allowed: >= 0)"),
+    ('targets_per_chip = 1\n[[targets]]\nweight = {uniform = [0, 1]}\n', "targets[0].weight: a number, not a distribution"),
+    ('targets_per_chip = 1\n[[targets]]\nweight = 0\n[[targets]]\nweight = 0\n', "targets: every weight is 0"),
+    ('[[targets]]\nweight = 2\n', "targets[0].weight: only used with a top-level targets_per_chip"),
+    ('targets_per_chip = 1\n[[targets]]\nwieght = 2\n', "targets[0].wieght: unknown key"),
+    # a kind that one chip's draw may not pick is still checked at load
+    ('targets_per_chip = 1\n[[targets]]\nweight = 1000\n[[targets]]\nweight = 0.001\nshape = "sphere"\nradius = 0.5\n'
+     'burial = 1.5\n', "targets[1].burial: 1.5 m buries the whole target"),
     ('[[targets]]\nshape = "mesh"\n', "targets[0].mesh: a file path is required"),
     ("[sonar]\nnear_range = 58.0\n", "sonar.near_range: chip far edge"),
 ])
@@ -130,3 +144,46 @@ def test_cli_missing_mesh_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "targets[0].mesh" in err and "nothere.obj" in err and len(err.splitlines()) == 1
     assert not (out / "images").exists()
+
+
+def test_target_kinds_are_drawn_by_weight():
+    preset = Preset.from_dict({
+        "targets_per_chip": {"choice": [1, 2]},
+        "targets": [{"shape": "box", "weight": 3, "length": {"uniform": [1.0, 2.0]}},
+                    {"shape": "torus", "weight": 1, "radius": 0.4, "tube_radius": 0.1},
+                    {"shape": "sphere", "weight": 0}]})
+    scenes = [preset.sample(0, i) for i in range(300)]
+    counts = [len(s.targets) for s in scenes]
+    assert set(counts) == {1, 2} and 0.4 < counts.count(1) / len(counts) < 0.6
+    shapes = [t.shape for s in scenes for t in s.targets]
+    assert "sphere" not in shapes  # weight 0: never drawn
+    assert 0.68 < shapes.count("box") / len(shapes) < 0.82  # 3 : 1
+    boxes = [t for s in scenes for t in s.targets if t.shape == "box"]
+    assert all(1.0 <= t.length <= 2.0 for t in boxes) and len({t.length for t in boxes}) == len(boxes)
+    assert all(t.radius == 0.4 and t.tube_radius == 0.1 for s in scenes for t in s.targets if t.shape == "torus")
+    assert preset.sample(0, 7) == scenes[7]  # still a function of (seed, index) alone
+
+
+def test_a_kinds_bad_draw_names_its_table():
+    """A drawn target that breaks a cross-field check names the [[targets]] table it came from."""
+    with pytest.raises(SasmiError, match=r"^targets\[1\]\.x: .* lies outside the chip"):
+        preset = Preset.from_dict({"targets_per_chip": 1, "sonar": {"chip_size": 6.0},
+                                   "targets": [{"shape": "sphere", "weight": 1},
+                                               {"shape": "cone", "weight": 1, "x": {"uniform": [0.0, 6.0]}}]})
+        for i in range(200):
+            preset.sample(0, i)
+
+
+def test_shipped_default_preset_draws_every_kind():
+    preset = load_preset("cylinder_chip")
+    shapes = {s.targets[0].shape for s in (preset.sample(0, i) for i in range(200))}
+    assert shapes == {"cylinder", "sphere", "box", "torus", "cone"}
+
+
+def test_cli_bad_target_kind_exit_2(tmp_path, capsys):
+    bad = write(tmp_path, "targets_per_chip = 1\n[[targets]]\nweight = -1\n")
+    out = tmp_path / "out"
+    assert main(["render", str(bad), "--out", str(out), "--size", "32"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("sasmi render: error: targets[0].weight") and len(err.splitlines()) == 1
+    assert not out.exists()

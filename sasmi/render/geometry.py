@@ -20,6 +20,7 @@ from sasmi.scene import Scene, Target
 
 CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (kernel reuse)
 SPHERE_SUBDIVISIONS = 3
+TORUS_SECTIONS = (32, 12)  # around the ring, around the tube: 384 vertices, fixed as for cylinders
 
 
 COS_POWER = {"lambert": 1, "lambert2": 2}  # seafloor.backscatter -> power of cos(incidence) in the radiance
@@ -100,7 +101,7 @@ def _load_mesh_file(path: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """Target mesh in metres, axis along +x for lying shapes, lowest point at z = 0."""
+    """Target mesh in metres, axis along +x for lying shapes (cylinder, box length), lowest point at z = 0."""
     import trimesh
 
     if t.shape == "cylinder":
@@ -116,6 +117,13 @@ def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
         top = v[:, 2] > 0
         v[top, :2] *= t.radius_top / t.radius  # frustum: shrink the top ring
         f = m.faces
+    elif t.shape == "box":
+        m = trimesh.creation.box(extents=[t.length, t.width, t.height])
+        v, f = m.vertices, m.faces
+    elif t.shape == "torus":  # a tyre lying flat: the ring in the seabed's plane
+        m = trimesh.creation.torus(major_radius=t.radius, minor_radius=t.tube_radius,
+                                   major_sections=TORUS_SECTIONS[0], minor_sections=TORUS_SECTIONS[1])
+        v, f = m.vertices, m.faces
     else:
         try:
             v, f = _load_mesh_file(t.mesh)
