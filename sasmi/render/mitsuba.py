@@ -29,7 +29,7 @@ from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.post import post_maps, postprocess
 from sasmi.render.slant import labels_to_slant, slant_map, to_slant
-from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, mi_mesh, shape_ids, surface_heights, visibility
+from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, camera_hits, mi_mesh, shape_ids, visibility
 from sasmi.scene import Scene
 
 
@@ -145,9 +145,15 @@ class Renderer:
     def radiance(self, seed: int) -> np.ndarray:
         return self.collect(self.launch(seed))
 
-    def visibility(self, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
+    def camera_hits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(H*W,) shape registry ids and surface heights (chip units) of the prepared scene at the pixel centres."""
+        return camera_hits(self.mi, self.dr, self._scene, self.size)
+
+    def visibility(self, g: Geometry, hits: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) each: visible target index and shadowing target index (-1 none) of the prepared `g`."""
-        return visibility(self.mi, self.dr, self._scene, self._target_ids, self._occluders, g)
+        ids, heights = hits if hits is not None else self.camera_hits()
+        return visibility(ids, heights, self._target_ids, self._occluders, g)
 
     def render(self, scene: Scene) -> Rendered:
         g = build_geometry(scene, self.size)
@@ -155,17 +161,19 @@ class Renderer:
         launched = self.launch(scene.seed)
         maps = post_maps(scene, g)  # numpy work while the render runs
         radiance = self.collect(launched)
-        visible, owner = self.visibility(g)
+        hits = self.camera_hits()
+        visible, owner = self.visibility(g, hits)
         if scene.sonar.slant_range:
-            return self._render_slant(scene, g, radiance, maps, visible, owner)
+            return self._render_slant(scene, g, radiance, maps, visible, owner, hits[1].reshape(self.size, self.size))
         return Rendered(image=postprocess(radiance, maps), mask=class_mask(visible, owner),
                         label=chip_label(scene, visible, owner, self.size),
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
-    def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner) -> Rendered:
+    def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner,
+                      heights: np.ndarray) -> Rendered:
         """The chip with its x axis in slant range (sasmi.render.slant): gain before the move, speckle after."""
         gain, speckle, offset = maps
-        m = slant_map(g, surface_heights(self.mi, self._scene, self.size))
+        m = slant_map(g, heights)
         image = postprocess(to_slant(radiance * gain, m), (np.ones_like(gain), speckle, offset))
         visible, owner = labels_to_slant(visible, owner, m)
         label = chip_label(scene, visible, owner, self.size)
