@@ -82,15 +82,20 @@ def load_scene(mi, dr, g: Geometry, spp: int):
     return mi.load_dict(d)
 
 
+def checked_mitsuba(size: int, spp: int):
+    """(mitsuba, drjit) for a renderer of `size` px and `spp` samples per pixel, once both are checked."""
+    check_size(size, "size")
+    if spp <= 0:
+        raise SasmiError(f"spp: {spp} is not allowed (allowed: >= 1)")
+    return import_mitsuba()
+
+
 class Renderer:
     """Renders scenes at one size and sample count, reusing the compiled kernel."""
 
     def __init__(self, size: int = 256, spp: int = 16):
-        check_size(size, "size")
-        if spp <= 0:
-            raise SasmiError(f"spp: {spp} is not allowed (allowed: >= 1)")
+        self.mi, self.dr = checked_mitsuba(size, spp)
         self.size, self.spp = size, spp
-        self.mi, self.dr = import_mitsuba()
         self._structure = None
         self._scene = None
         self._params = None

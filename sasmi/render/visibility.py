@@ -103,6 +103,12 @@ class Occluders:
         return index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64), self.ids)
 
 
+def pixel_centres(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, n) x and y (chip units) of the pixel centres of an n x n chip; row = y, col = x."""
+    centres = (np.arange(n) + 0.5) / n * 2 - 1
+    return np.meshgrid(centres, centres)
+
+
 def camera_hits(mi, dr, scene, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(n*n,) int64 Mitsuba shape registry id (0 for a miss) and float64 height (chip units) of the surface
     seen through each pixel centre, straight down, row-major.
@@ -111,8 +117,7 @@ def camera_hits(mi, dr, scene, n: int) -> tuple[np.ndarray, np.ndarray]:
     SurfaceInteraction, and evaluating the two outputs together traces the rays once (reading
     them one after the other would launch the ray-tracing kernel once per output).
     """
-    centres = (np.arange(n) + 0.5) / n * 2 - 1
-    xs, ys = np.meshgrid(centres, centres)
+    xs, ys = pixel_centres(n)
     origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
     pi = scene.ray_intersect_preliminary(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
     ids, heights = dr.reinterpret_array(mi.UInt32, pi.shape), CAMERA_HEIGHT - pi.t
@@ -129,8 +134,7 @@ def visibility(ids: np.ndarray, heights: np.ndarray, target_ids: np.ndarray, occ
     """
     n = g.size
     visible = index_of(ids, target_ids)
-    centres = (np.arange(n) + 0.5) / n * 2 - 1
-    xs, ys = np.meshgrid(centres, centres)
+    xs, ys = pixel_centres(n)
     # lifted off the floor (only floor points are tested) so the shadow rays do not start inside it
     lifted = np.stack([xs.ravel(), ys.ravel(), heights + 1e-4], 1).astype(np.float32)  # (P, 3)
     probes = shadow_probes(len(g.emitter_positions), APERTURE_PROBES if g.broadside else SHADOW_PROBES)
