@@ -22,7 +22,7 @@ from sasmi.errors import SasmiError
 from sasmi.labels import ChipLabel
 from sasmi.preprocess import check_size
 from sasmi.masks import instance_ids
-from sasmi.render.annotate import chip_label, class_mask, labels_dict
+from sasmi.render.annotate import chip_label, class_mask, clutter_in_slant, labels_dict
 from sasmi.render.bsdf import bsdf_dict
 from sasmi.render.bsdf import register as register_bsdf
 from sasmi.render.geometry import Geometry, build_geometry
@@ -185,7 +185,8 @@ class Renderer:
         unit = 2.0 / scene.sonar.chip_size
         targets = tuple(replace(t, pixel_centre=(float(m.column(t.params["x"] * unit, 0.0)), t.pixel_centre[1]))
                         for t in label.targets)
-        return Rendered(image=image, mask=class_mask(visible, owner), label=replace(label, targets=targets),
+        label = replace(label, targets=targets, clutter=clutter_in_slant(label.clutter, m.column, self.size))
+        return Rendered(image=image, mask=class_mask(visible, owner), label=label,
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
 

@@ -84,11 +84,28 @@ def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
         if std > 0:
             rough = np.pad(field, ((0, 1), (0, 1)), mode="wrap") * (floor.rms_height / std)
     phase = float(rng.uniform(0, 2 * np.pi)) if floor.ripple_amplitude > 0 else 0.0
-    rocks = []
-    for _ in range(floor.rocks):
-        cx, cy = rng.uniform(-chip_size / 2, chip_size / 2, size=2)
-        rocks.append((float(cx), float(cy), float(floor.rock_radius * rng.uniform(0.6, 1.4))))
     return Surface(chip_size=chip_size, rough=rough, ripple_amplitude=floor.ripple_amplitude,
                    ripple_wavelength=floor.ripple_wavelength, ripple_direction=floor.ripple_direction,
-                   ripple_phase=phase, rocks=tuple(rocks))
+                   ripple_phase=phase, rocks=_draw_rocks(rng, floor, chip_size))
+
+
+def rocks(floor: Seafloor, chip_size: float, seed: int) -> tuple[tuple[float, float, float], ...]:
+    """`surface(floor, chip_size, seed).rocks` without making the rough surface: the same draws, in the
+    same order (the rough surface's noise and the ripple phase come first), skipping the FFT."""
+    rng = np.random.default_rng([seed, 7])
+    if floor.rms_height > 0:
+        rng.standard_normal((FLOOR_SAMPLES, FLOOR_SAMPLES))
+    if floor.ripple_amplitude > 0:
+        rng.uniform(0, 2 * np.pi)
+    return _draw_rocks(rng, floor, chip_size)
+
+
+def _draw_rocks(rng: np.random.Generator, floor: Seafloor, chip_size: float
+                ) -> tuple[tuple[float, float, float], ...]:
+    """(centre x, centre y, radius) in m per rock; the rock is a Gaussian bump of height = radius, sigma = radius / 2."""
+    out = []
+    for _ in range(floor.rocks):
+        cx, cy = rng.uniform(-chip_size / 2, chip_size / 2, size=2)
+        out.append((float(cx), float(cy), float(floor.rock_radius * rng.uniform(0.6, 1.4))))
+    return tuple(out)
 
