@@ -13,7 +13,6 @@ render kernel once per process and later images cost only the render itself.
 """
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -91,47 +90,34 @@ def checked_mitsuba(size: int, spp: int):
     return import_mitsuba()
 
 
-@dataclass
-class Loaded:
-    """A Mitsuba scene of one structure (Geometry.structure) with what updates and ray-casts it."""
-    scene: object  # mi.Scene
-    params: object  # mi.SceneParameters of scene
-    occluders: Occluders
-    target_ids: np.ndarray  # (T,) registry ids of target_0 .. target_{T-1}
-
-
-SCENES_KEPT = 4  # loaded scenes kept per Renderer: a preset mixing shapes switches between a few structures
-
-
 class Renderer:
-    """Renders scenes at one size and sample count, reusing the compiled kernel.
-
-    A scene whose structure differs from the last one's (a sphere after a cylinder) needs
-    its own loaded Mitsuba scene; the last SCENES_KEPT are kept, so a preset that mixes a
-    few shapes loads each once (a load costs about as much as a whole render) and after
-    that only updates them in place.
-    """
+    """Renders scenes at one size and sample count, reusing the compiled kernel."""
 
     def __init__(self, size: int = 256, spp: int = 16):
         self.mi, self.dr = checked_mitsuba(size, spp)
         self.size, self.spp = size, spp
-        self._loaded: OrderedDict[tuple, Loaded] = OrderedDict()
-        self._current: Loaded | None = None
+        self._structure = None
+        self._scene = None
+        self._params = None
+        self._occluders: Occluders | None = None
+        self._target_ids: np.ndarray | None = None
 
     # -- scene construction -------------------------------------------------------------
-    def _load(self, g: Geometry) -> Loaded:
-        scene = load_scene(self.mi, self.dr, g, self.spp)
-        return Loaded(scene=scene, params=self.mi.traverse(scene), occluders=Occluders(self.mi, self.dr, g),
-                      target_ids=shape_ids(self.mi, self.dr, scene, len(g.targets)))
+    def _load(self, g: Geometry) -> None:
+        self._scene = load_scene(self.mi, self.dr, g, self.spp)
+        self._params = self.mi.traverse(self._scene)
+        self._occluders = Occluders(self.mi, self.dr, g)
+        self._target_ids = shape_ids(self.mi, self.dr, self._scene, len(g.targets))
+        self._structure = g.structure
 
     def _update(self, g: Geometry) -> None:
-        p = self._current.params
+        p = self._params
         p["floor.vertex_positions"] = aligned(g.floor.vertices)
         p["floor.bsdf.reflectance.value"] = g.floor.albedo
         for k, t in enumerate(g.targets):
             p[f"target_{k}.vertex_positions"] = aligned(t.vertices)
             p[f"target_{k}.bsdf.reflectance.value"] = t.albedo
-        self._current.occluders.update(g)
+        self._occluders.update(g)
         for k, (pos, aim) in enumerate(zip(g.emitter_positions, g.aims)):
             p[f"emitter_{k}.to_world"] = spot_to_world(self.mi, pos, aim)
         p["emitter_0.intensity.value"] = g.emitter_intensity
@@ -139,28 +125,23 @@ class Renderer:
 
     def prepare(self, g: Geometry) -> None:
         """Load or update the Mitsuba scene so that it shows `g`."""
-        key = g.structure
-        if key in self._loaded:
-            self._loaded.move_to_end(key)
-            self._current = self._loaded[key]
+        if g.structure != self._structure:
+            self._load(g)
+        else:
             self._update(g)
-            return
-        self._current = self._loaded[key] = self._load(g)
-        while len(self._loaded) > SCENES_KEPT:
-            self._loaded.popitem(last=False)
 
     @property
     def mitsuba_scene(self):
-        return self._current.scene
+        return self._scene
 
     @property
     def params(self):
-        return self._current.params
+        return self._params
 
     # -- rendering ----------------------------------------------------------------------
     def launch(self, seed: int):
         """Start rendering the prepared scene; Dr.Jit runs it in its own threads until `collect`."""
-        return self.mi.render(self._current.scene, spp=self.spp, seed=seed % (2**31))
+        return self.mi.render(self._scene, spp=self.spp, seed=seed % (2**31))
 
     def collect(self, launched) -> np.ndarray:
         """(H, W) float32 radiance of a launched render, exposure folded in (not clipped)."""
@@ -171,13 +152,13 @@ class Renderer:
 
     def camera_hits(self) -> tuple[np.ndarray, np.ndarray]:
         """(H*W,) shape registry ids and surface heights (chip units) of the prepared scene at the pixel centres."""
-        return camera_hits(self.mi, self.dr, self._current.scene, self.size)
+        return camera_hits(self.mi, self.dr, self._scene, self.size)
 
     def visibility(self, g: Geometry, hits: tuple[np.ndarray, np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) each: visible target index and shadowing target index (-1 none) of the prepared `g`."""
         ids, heights = hits if hits is not None else self.camera_hits()
-        return visibility(ids, heights, self._current.target_ids, self._current.occluders, g)
+        return visibility(ids, heights, self._target_ids, self._occluders, g)
 
     def render(self, scene: Scene) -> Rendered:
         g = build_geometry(scene, self.size)
