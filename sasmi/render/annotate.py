@@ -70,9 +70,13 @@ def clutter_labels(scene: Scene, size: int) -> tuple[dict, ...]:
     return tuple(out)
 
 
-def clutter_in_slant(clutter: tuple[dict, ...], column, size: int) -> tuple[dict, ...]:
-    """`clutter` of a slant-range chip: centre and box columns moved by `column` (ground x in chip
-    units, height -> slant column, `sasmi.render.slant.SlantMap.column`); the radius stays the along-track one."""
+def clutter_in_slant(clutter: tuple[dict, ...], column, size: int, unit: float) -> tuple[dict, ...]:
+    """`clutter` of a slant-range chip: centre and box columns moved by `column` (ground x, height in
+    chip units -> slant column, `sasmi.render.slant.SlantMap.column`; `unit` chip units per metre).
+
+    A rock's top lies over towards the track (it is nearer in slant range than its base), so
+    the box's near edge is taken at the rock's height; the radius stays the along-track one.
+    """
     def ground(u: float) -> float:  # continuous pixel coordinate (0 = left edge) -> chip units
         return u / size * 2 - 1
 
@@ -80,8 +84,9 @@ def clutter_in_slant(clutter: tuple[dict, ...], column, size: int) -> tuple[dict
     for c in clutter:
         c0, r0, c1, r1 = c["bbox"]
         col = float(column(ground(c["pixel_centre"][0] + 0.5), 0.0))
-        left, right = (float(column(ground(u), 0.0)) + 0.5 for u in (c0, c1))
-        box = [max(0, math.floor(left)), r0, min(size, math.ceil(right)), r1]
+        near = float(column(ground(c0), c["radius_m"] * unit)) + 0.5
+        far = float(column(ground(c1), 0.0)) + 0.5
+        box = [max(0, math.floor(near)), r0, min(size, math.ceil(far)), r1]
         out.append({**c, "pixel_centre": [col, c["pixel_centre"][1]], "bbox": box})
     return tuple(out)
 

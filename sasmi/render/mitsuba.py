@@ -185,7 +185,7 @@ class Renderer:
         unit = 2.0 / scene.sonar.chip_size
         targets = tuple(replace(t, pixel_centre=(float(m.column(t.params["x"] * unit, 0.0)), t.pixel_centre[1]))
                         for t in label.targets)
-        label = replace(label, targets=targets, clutter=clutter_in_slant(label.clutter, m.column, self.size))
+        label = replace(label, targets=targets, clutter=clutter_in_slant(label.clutter, m.column, self.size, unit))
         return Rendered(image=image, mask=class_mask(visible, owner), label=label,
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
