@@ -1,8 +1,9 @@
 """Render speed and memory: ms/image at 256², 32 emitters, 16 spp (labels and PNG writing
-included), median over >= 20 images after warm-up, wall and CPU time (all threads); and peak
-RSS of `sasmi render` for --count 10 vs --count 1000 (memory must stay flat in the count).
+included), median over >= 20 images after warm-up, wall and CPU time (all threads); POV-Ray's
+time for the first of those scenes, as `sasmi crosscheck` traces it, beside it; and peak RSS
+of `sasmi render` for --count 10 vs --count 1000 (memory must stay flat in the count).
 
-    .venv/bin/python benchmarks/render.py [--images 24] [--rss-counts 10 1000] [--rss-size 256]
+    .venv/bin/python benchmarks/render.py [--images 24] [--rss-counts 10 1000] [--rss-size 256] [--no-povray]
 """
 from __future__ import annotations
 
@@ -47,6 +48,22 @@ def per_image_ms(images: int, warmup: int, size: int, spp: int) -> tuple[list[fl
     return times[warmup:], cpu[warmup:]
 
 
+def povray_ms(scene, size: int) -> tuple[float, float]:
+    """Wall and CPU milliseconds of the `povray` process rendering `scene` as the cross-check does."""
+    import resource
+
+    from sasmi.render import crosscheck, povray
+    from sasmi.render.geometry import build_geometry
+
+    g = build_geometry(scene, size)
+    sdl = povray.geometry_sdl(g)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    _, seconds = povray.radiance(sdl, size, crosscheck.EXPOSURE_MARGIN / povray.radiance_bound(g))
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return seconds * 1000, cpu * 1000
+
+
 def peak_rss_mb(count: int, size: int) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
@@ -66,14 +83,22 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--rss-counts", type=int, nargs="*", default=[10, 1000])
     ap.add_argument("--rss-size", type=int, default=256)
+    ap.add_argument("--no-povray", action="store_true", help="skip the POV-Ray timing (no povray installed)")
     args = ap.parse_args()
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     times, cpu = per_image_ms(args.images, args.warmup, args.size, args.spp)
     q = statistics.quantiles(times, n=10)
     print(f"render {args.size}x{args.size}, 32 emitters, {args.spp} spp, labels + PNG: "
-          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}; {len(times)} images); "
-          f"CPU {statistics.median(cpu):.0f} ms/image")
+          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}, mean {statistics.mean(times):.0f}; "
+          f"{len(times)} images); CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
+    if not args.no_povray:
+        from sasmi.scene import load_preset
+
+        wall, pov_cpu = povray_ms(load_preset(PRESET).sample(0, 0), args.size)
+        print(f"POV-Ray on the first of those scenes ({args.size}x{args.size}, 32 emitters, 3x3 jittered + centre ray, "
+              f"radiance only): {wall:.0f} ms wall, CPU {pov_cpu:.0f} ms; POV-Ray / Mitsuba: "
+              f"{wall / statistics.median(times):.1f}x wall, {pov_cpu / statistics.median(cpu):.1f}x CPU")
     for count in args.rss_counts:
         rss, seconds = peak_rss_mb(count, args.rss_size)
         print(f"sasmi render --count {count} --size {args.rss_size}: peak RSS {rss:.0f} MB, "

@@ -99,10 +99,14 @@ class ChipLabel:
     image: str = ""  # path of the image, relative to the render set
     mask: str = ""  # path of the class mask, relative to the render set
     extra: dict = field(default_factory=dict)  # keys this version does not know, kept on rewrite
+    # labelled clutter (rocks): kind, pixel_centre (col, row), radius (px), bbox (col0, row0, col1, row1),
+    # x, y, radius_m (m); written only when there is some, so older records read unchanged
+    clutter: tuple[dict, ...] = ()
 
     def to_json(self) -> dict:
         record = {"index": self.index, "image": self.image, "mask": self.mask, **self.scene,
-                  "targets": [t.to_json() for t in self.targets], "size": self.size, **self.extra}
+                  "targets": [t.to_json() for t in self.targets], "size": self.size,
+                  **({"clutter": [dict(c) for c in self.clutter]} if self.clutter else {}), **self.extra}
         return _finite(record, f"labels[{self.index}]")
 
     def dumps(self) -> str:
@@ -111,11 +115,12 @@ class ChipLabel:
     @classmethod
     def from_json(cls, d: dict) -> "ChipLabel":
         scene_keys = ("sonar", "seafloor", "post", "seed")
-        known = ("index", "image", "mask", "targets", "size", *scene_keys)
+        known = ("index", "image", "mask", "targets", "size", "clutter", *scene_keys)
         return cls(index=int(d["index"]), size=int(d["size"]),
                    scene={k: d[k] for k in scene_keys if k in d},
                    targets=tuple(TargetLabel.from_json(t) for t in d.get("targets", ())),
                    image=str(d.get("image", "")), mask=str(d.get("mask", "")),
+                   clutter=tuple(dict(c) for c in d.get("clutter", ())),
                    extra={k: v for k, v in d.items() if k not in known})
 
 

@@ -151,6 +151,22 @@ def test_slant_range_lays_a_tall_target_over_the_floor_in_front(renderer64):
     np.testing.assert_allclose(flat[True].mean(axis=0), flat[False].mean(axis=0), rtol=0.01)
 
 
+def test_slant_range_moves_the_rock_boxes_with_the_rocks(renderer64):
+    """sonar.slant_range squeezes the near range: the rocks' clutter boxes move with them, so the
+    bright facets of the rocks stay inside (a box left at its ground-range columns misses them)."""
+    scene = flat_chip(sonar=Sonar(near_range=10.0, altitude=20.0, slant_range=True), targets=(),
+                      seafloor=Seafloor(rms_height=0.0, rocks=6, rock_radius=0.3))
+    out = renderer64.render(scene)
+    inside = np.zeros((64, 64), dtype=bool)
+    for c in out.label.clutter:
+        c0, r0, c1, r1 = c["bbox"]
+        inside[r0:r1, c0:c1] = True
+    bright = out.image > 1.3 * np.median(out.image)
+    assert bright.sum() > 5 and inside[bright].all()
+    assert [c["bbox"] for c in out.label.clutter] != [c["bbox"] for c in renderer64.render(
+        flat_chip(sonar=Sonar(near_range=10.0, altitude=20.0), targets=(), seafloor=scene.seafloor)).label.clutter]
+
+
 def test_aperture_grows_with_range():
     """sonar.aperture_angle: broadside beams, so the stretch of track that lights a point is 2 R tan(angle / 2):
     twice the range, twice the aperture (constant along-track resolution). With the paper's spots aimed at

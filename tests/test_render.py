@@ -173,3 +173,35 @@ def test_one_call_api_reuses_one_renderer_per_size():
     assert mitsuba.renderer_for(32, 4) is not mitsuba.renderer_for(48, 4)
     assert np.abs(sasmi.render(scene, size=32, spp=4).image - a.image).max() <= 1 / 255
     assert a.labels["targets"][0]["shadow_pixels"] == a.label.targets[0].shadow_pixels > 0
+
+
+def test_rocks_are_labelled_clutter_whose_boxes_hold_them(renderer64):
+    """Every raised or bright pixel of a flat floor with rocks lies in a rock's box; each box is on its rock."""
+    from sasmi.labels import ChipLabel
+    from sasmi.scene import Seafloor
+
+    scene = Scene(sonar=Sonar(near_range=35.0), seafloor=Seafloor(rms_height=0.0, ripple_amplitude=0.0, rocks=6,
+                                                                  rock_radius=0.3), post=QUIET, seed=8).validate()
+    out = renderer64.render(scene)
+    clutter = out.label.clutter
+    assert len(clutter) == 6 and all(c["kind"] == "rock" for c in clutter)
+    ids, heights = renderer64.camera_hits()  # the surface the render just saw, chip units
+    heights = heights.reshape(64, 64) * scene.sonar.chip_size / 2  # m
+    inside = np.zeros((64, 64), dtype=bool)
+    for c in clutter:
+        c0, r0, c1, r1 = c["bbox"]
+        inside[r0:r1, c0:c1] = True
+        col, row = c["pixel_centre"]
+        assert c0 <= col < c1 and r0 <= row < r1
+        # the box's centre pixel is on the rock: raised by most of its height
+        assert heights[int(round(row)), int(round(col))] > 0.5 * c["radius_m"], c
+    smallest = min(c["radius_m"] for c in clutter)
+    raised = heights > 0.2 * smallest
+    bright = out.image > 1.3 * np.median(out.image)
+    assert raised.sum() > 20 and bright.sum() > 5
+    assert inside[raised].all() and inside[bright].all()
+    # written only when there is clutter, read back the same; a record from before clutter reads as none
+    record = out.label.to_json()
+    assert ChipLabel.from_json(record).clutter == clutter
+    record.pop("clutter")
+    assert ChipLabel.from_json(record).clutter == () and "clutter" not in ChipLabel.from_json(record).to_json()

@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from sasmi.errors import SasmiError
-from sasmi.preprocess import check_size
 from sasmi.render.geometry import Geometry, build_geometry
-from sasmi.render.llvm import aligned, import_mitsuba
-from sasmi.render.mitsuba import load_scene, spot_to_world
+from sasmi.render.llvm import aligned
+from sasmi.render.mitsuba import checked_mitsuba, load_scene, spot_to_world
 from sasmi.render.post import post_fields
 from sasmi.render.seafloor import surface
+from sasmi.render.visibility import pixel_centres
 from sasmi.scene import Scene
 
 if TYPE_CHECKING:
@@ -85,13 +85,9 @@ class DifferentiableRenderer:
     """
 
     def __init__(self, size: int = 256, spp: int = 16):
-        check_size(size, "size")
-        if spp <= 0:
-            raise SasmiError(f"spp: {spp} is not allowed (allowed: >= 1)")
+        self.mi, self.dr = checked_mitsuba(size, spp)
         self.size, self.spp = size, spp
-        self.mi, self.dr = import_mitsuba()
-        centres = (np.arange(size) + 0.5) / size * 2 - 1
-        x, y = np.meshgrid(centres, centres)
+        x, y = pixel_centres(size)
         self._pixel_x, self._pixel_y = self._upload(x), self._upload(y)  # (H·W,) pixel centres, row-major
 
     def _upload(self, a: np.ndarray):

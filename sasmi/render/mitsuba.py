@@ -22,14 +22,14 @@ from sasmi.errors import SasmiError
 from sasmi.labels import ChipLabel
 from sasmi.preprocess import check_size
 from sasmi.masks import instance_ids
-from sasmi.render.annotate import chip_label, class_mask, labels_dict
+from sasmi.render.annotate import chip_label, class_mask, clutter_in_slant, labels_dict
 from sasmi.render.bsdf import bsdf_dict
 from sasmi.render.bsdf import register as register_bsdf
 from sasmi.render.geometry import Geometry, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.post import post_maps, postprocess
 from sasmi.render.slant import labels_to_slant, slant_map, to_slant
-from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, mi_mesh, shape_ids, surface_heights, visibility
+from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, camera_hits, mi_mesh, shape_ids, visibility
 from sasmi.scene import Scene
 
 
@@ -82,15 +82,20 @@ def load_scene(mi, dr, g: Geometry, spp: int):
     return mi.load_dict(d)
 
 
+def checked_mitsuba(size: int, spp: int):
+    """(mitsuba, drjit) for a renderer of `size` px and `spp` samples per pixel, once both are checked."""
+    check_size(size, "size")
+    if spp <= 0:
+        raise SasmiError(f"spp: {spp} is not allowed (allowed: >= 1)")
+    return import_mitsuba()
+
+
 class Renderer:
     """Renders scenes at one size and sample count, reusing the compiled kernel."""
 
     def __init__(self, size: int = 256, spp: int = 16):
-        check_size(size, "size")
-        if spp <= 0:
-            raise SasmiError(f"spp: {spp} is not allowed (allowed: >= 1)")
+        self.mi, self.dr = checked_mitsuba(size, spp)
         self.size, self.spp = size, spp
-        self.mi, self.dr = import_mitsuba()
         self._structure = None
         self._scene = None
         self._params = None
@@ -145,9 +150,15 @@ class Renderer:
     def radiance(self, seed: int) -> np.ndarray:
         return self.collect(self.launch(seed))
 
-    def visibility(self, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
+    def camera_hits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(H*W,) shape registry ids and surface heights (chip units) of the prepared scene at the pixel centres."""
+        return camera_hits(self.mi, self.dr, self._scene, self.size)
+
+    def visibility(self, g: Geometry, hits: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) each: visible target index and shadowing target index (-1 none) of the prepared `g`."""
-        return visibility(self.mi, self.dr, self._scene, self._target_ids, self._occluders, g)
+        ids, heights = hits if hits is not None else self.camera_hits()
+        return visibility(ids, heights, self._target_ids, self._occluders, g)
 
     def render(self, scene: Scene) -> Rendered:
         g = build_geometry(scene, self.size)
@@ -155,24 +166,27 @@ class Renderer:
         launched = self.launch(scene.seed)
         maps = post_maps(scene, g)  # numpy work while the render runs
         radiance = self.collect(launched)
-        visible, owner = self.visibility(g)
+        hits = self.camera_hits()
+        visible, owner = self.visibility(g, hits)
         if scene.sonar.slant_range:
-            return self._render_slant(scene, g, radiance, maps, visible, owner)
+            return self._render_slant(scene, g, radiance, maps, visible, owner, hits[1].reshape(self.size, self.size))
         return Rendered(image=postprocess(radiance, maps), mask=class_mask(visible, owner),
                         label=chip_label(scene, visible, owner, self.size),
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
-    def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner) -> Rendered:
+    def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner,
+                      heights: np.ndarray) -> Rendered:
         """The chip with its x axis in slant range (sasmi.render.slant): gain before the move, speckle after."""
         gain, speckle, offset = maps
-        m = slant_map(g, surface_heights(self.mi, self._scene, self.size))
+        m = slant_map(g, heights)
         image = postprocess(to_slant(radiance * gain, m), (np.ones_like(gain), speckle, offset))
         visible, owner = labels_to_slant(visible, owner, m)
         label = chip_label(scene, visible, owner, self.size)
         unit = 2.0 / scene.sonar.chip_size
         targets = tuple(replace(t, pixel_centre=(float(m.column(t.params["x"] * unit, 0.0)), t.pixel_centre[1]))
                         for t in label.targets)
-        return Rendered(image=image, mask=class_mask(visible, owner), label=replace(label, targets=targets),
+        label = replace(label, targets=targets, clutter=clutter_in_slant(label.clutter, m.column, self.size, unit))
+        return Rendered(image=image, mask=class_mask(visible, owner), label=label,
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
 

@@ -16,6 +16,12 @@ import numpy as np
 from sasmi.scene import Seafloor
 
 FLOOR_SAMPLES = 256  # rough-surface grid points across the chip (a fast FFT size)
+ROCK_REACH = 7.5  # sigmas: a rock ends where it adds exp(-28) < 1e-12 of its height, below float32's resolution
+
+
+def _rock(d2: np.ndarray, r: float) -> np.ndarray:
+    """Height (m) of a rock of radius r at squared distance d2 (m^2) from its centre: a Gaussian, sigma r / 2."""
+    return r * np.exp(-d2 / (2 * (r / 2) ** 2))
 
 
 @dataclass(frozen=True)
@@ -36,13 +42,31 @@ class Surface:
 
     def _add_shapes(self, heights: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """`heights` plus the ripples and rocks at x, y."""
-        if self.ripple_amplitude > 0:
-            theta = np.deg2rad(self.ripple_direction)
-            heights = heights + self.ripple_amplitude * np.sin(
-                2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase)
+        heights = heights + self._ripples(x, y)
         for cx, cy, r in self.rocks:
-            heights = heights + r * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * (r / 2) ** 2))
+            d2 = (x - cx) ** 2 + (y - cy) ** 2
+            heights = heights + np.where(d2 <= (ROCK_REACH * r / 2) ** 2, _rock(d2, r), 0.0)
         return heights
+
+    def _add_shapes_grid(self, heights: np.ndarray, coords: np.ndarray) -> np.ndarray:
+        """`_add_shapes` on the grid coords x coords (row = y, col = x), each rock only within its reach:
+        the same heights at a fraction of the cost (30 rocks over the whole grid cost more than the FFT)."""
+        x, y = np.meshgrid(coords, coords)
+        heights = heights + self._ripples(x, y)
+        for cx, cy, r in self.rocks:
+            reach = ROCK_REACH * r / 2
+            c0, c1 = np.searchsorted(coords, cx - reach), np.searchsorted(coords, cx + reach, side="right")
+            r0, r1 = np.searchsorted(coords, cy - reach), np.searchsorted(coords, cy + reach, side="right")
+            d2 = (coords[c0:c1][None, :] - cx) ** 2 + (coords[r0:r1][:, None] - cy) ** 2
+            heights[r0:r1, c0:c1] += np.where(d2 <= reach**2, _rock(d2, r), 0.0)
+        return heights
+
+    def _ripples(self, x: np.ndarray, y: np.ndarray) -> np.ndarray | float:
+        if self.ripple_amplitude <= 0:
+            return 0.0
+        theta = np.deg2rad(self.ripple_direction)
+        return self.ripple_amplitude * np.sin(
+            2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase)
 
     def _rough_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         n = self.rough.shape[0] - 1
@@ -57,12 +81,13 @@ class Surface:
     def grid(self, n: int) -> np.ndarray:
         """(n+1, n+1) heights (m) at the vertices of an n x n grid spanning the chip; row = y, col = x."""
         coords = np.linspace(-self.chip_size / 2, self.chip_size / 2, n + 1)
-        x, y = np.meshgrid(coords, coords)
         samples = self.rough.shape[0] - 1
         if samples % n == 0:  # the vertices are grid points: take them (the same values, no interpolation cost)
-            step = samples // n
-            return self._add_shapes(self.rough[::step, ::step].copy(), x, y)
-        return self.at(x, y)
+            rough = self.rough[::samples // n, ::samples // n]
+        else:
+            x, y = np.meshgrid(coords, coords)
+            rough = self._rough_at(x, y)
+        return self._add_shapes_grid(rough, coords)
 
 
 def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
@@ -84,11 +109,28 @@ def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
         if std > 0:
             rough = np.pad(field, ((0, 1), (0, 1)), mode="wrap") * (floor.rms_height / std)
     phase = float(rng.uniform(0, 2 * np.pi)) if floor.ripple_amplitude > 0 else 0.0
-    rocks = []
-    for _ in range(floor.rocks):
-        cx, cy = rng.uniform(-chip_size / 2, chip_size / 2, size=2)
-        rocks.append((float(cx), float(cy), float(floor.rock_radius * rng.uniform(0.6, 1.4))))
     return Surface(chip_size=chip_size, rough=rough, ripple_amplitude=floor.ripple_amplitude,
                    ripple_wavelength=floor.ripple_wavelength, ripple_direction=floor.ripple_direction,
-                   ripple_phase=phase, rocks=tuple(rocks))
+                   ripple_phase=phase, rocks=_draw_rocks(rng, floor, chip_size))
+
+
+def rocks(floor: Seafloor, chip_size: float, seed: int) -> tuple[tuple[float, float, float], ...]:
+    """`surface(floor, chip_size, seed).rocks` without making the rough surface: the same draws, in the
+    same order (the rough surface's noise and the ripple phase come first), skipping the FFT."""
+    rng = np.random.default_rng([seed, 7])
+    if floor.rms_height > 0:
+        rng.standard_normal((FLOOR_SAMPLES, FLOOR_SAMPLES))
+    if floor.ripple_amplitude > 0:
+        rng.uniform(0, 2 * np.pi)
+    return _draw_rocks(rng, floor, chip_size)
+
+
+def _draw_rocks(rng: np.random.Generator, floor: Seafloor, chip_size: float
+                ) -> tuple[tuple[float, float, float], ...]:
+    """(centre x, centre y, radius) in m per rock; the rock is a Gaussian bump of height = radius, sigma = radius / 2."""
+    out = []
+    for _ in range(floor.rocks):
+        cx, cy = rng.uniform(-chip_size / 2, chip_size / 2, size=2)
+        out.append((float(cx), float(cy), float(floor.rock_radius * rng.uniform(0.6, 1.4))))
+    return tuple(out)
 

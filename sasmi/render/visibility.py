@@ -1,6 +1,7 @@
 """Which target each pixel sees, and which target hides it from the array: ray casts for the masks.
 
-Camera rays through pixel centres find the visible surface in the rendered Mitsuba scene;
+Camera rays through pixel centres find the visible surface in the rendered Mitsuba scene
+(one preliminary intersection: shape and height, queued right behind the render's kernel);
 from each floor hit, rays towards SHADOW_PROBES emitters spread over the array are traced
 against the targets alone (`Occluders`), so a ripple between a floor point and a target
 does not punch a hole in that target's acoustic shadow. A floor point hidden by a target
@@ -98,34 +99,44 @@ class Occluders:
         # Positions travel as array data, not as kernel literals: one compiled kernel serves every scene.
         rays = mi.Ray3f(mi.Point3f(*(aligned(origins[:, i]) for i in range(3))),
                         mi.Vector3f(*(aligned(directions[:, i]) for i in range(3))))
-        hits = self.scene.ray_intersect(mi.Ray3f(rays, mi.Float(aligned(dist * (1 - 1e-4)))))
+        hits = self.scene.ray_intersect_preliminary(mi.Ray3f(rays, mi.Float(aligned(dist * (1 - 1e-4)))))
         return index_of(np.asarray(dr.reinterpret_array(mi.UInt32, hits.shape), dtype=np.int64), self.ids)
 
 
-def camera_hits(mi, scene, n: int):
-    """Mitsuba SurfaceInteraction of the rays through the n x n pixel centres, straight down."""
+def pixel_centres(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, n) x and y (chip units) of the pixel centres of an n x n chip; row = y, col = x."""
     centres = (np.arange(n) + 0.5) / n * 2 - 1
-    xs, ys = np.meshgrid(centres, centres)
+    return np.meshgrid(centres, centres)
+
+
+def camera_hits(mi, dr, scene, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n*n,) int64 Mitsuba shape registry id (0 for a miss) and float64 height (chip units) of the surface
+    seen through each pixel centre, straight down, row-major.
+
+    One preliminary intersection gives both: the masks need which shape and where, not the full
+    SurfaceInteraction, and evaluating the two outputs together traces the rays once (reading
+    them one after the other would launch the ray-tracing kernel once per output).
+    """
+    xs, ys = pixel_centres(n)
     origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
-    return scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+    pi = scene.ray_intersect_preliminary(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
+    ids, heights = dr.reinterpret_array(mi.UInt32, pi.shape), CAMERA_HEIGHT - pi.t
+    dr.eval(ids, heights)
+    return np.asarray(ids, dtype=np.int64), np.asarray(heights, dtype=np.float64)
 
 
-def surface_heights(mi, scene, n: int) -> np.ndarray:
-    """(n, n) float64 height (chip units) of the surface seen through each pixel centre."""
-    return np.asarray(camera_hits(mi, scene, n).p.z, dtype=np.float64).reshape(n, n)
-
-
-def visibility(mi, dr, scene, target_ids: np.ndarray, occluders: Occluders, g: Geometry
+def visibility(ids: np.ndarray, heights: np.ndarray, target_ids: np.ndarray, occluders: Occluders, g: Geometry
                ) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) int64 each: index of the visible target (-1 none) and of the target shadowing the pixel (-1 none).
 
-    `scene` is the loaded Mitsuba scene of `g` (floor and targets), `target_ids` its targets' ids.
+    `ids` and `heights` (H*W,) are `camera_hits` of the rendered Mitsuba scene of `g`, `target_ids`
+    its targets' registry ids.
     """
     n = g.size
-    si = camera_hits(mi, scene, n)
-    visible = index_of(np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64), target_ids)
-
-    lifted = np.asarray(si.p + si.n * 1e-4, dtype=np.float32).reshape(3, -1).T  # (P, 3)
+    visible = index_of(ids, target_ids)
+    xs, ys = pixel_centres(n)
+    # lifted off the floor (only floor points are tested) so the shadow rays do not start inside it
+    lifted = np.stack([xs.ravel(), ys.ravel(), heights + 1e-4], 1).astype(np.float32)  # (P, 3)
     probes = shadow_probes(len(g.emitter_positions), APERTURE_PROBES if g.broadside else SHADOW_PROBES)
     emitters = g.emitter_positions[probes].astype(np.float32)  # (K, 3)
     owner = np.full(n * n, -1, dtype=np.int64)
