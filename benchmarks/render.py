@@ -90,8 +90,9 @@ def main() -> None:
     times, cpu = per_image_ms(args.images, args.warmup, args.size, args.spp)
     q = statistics.quantiles(times, n=10)
     print(f"render {args.size}x{args.size}, 32 emitters, {args.spp} spp, labels + PNG: "
-          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}, mean {statistics.mean(times):.0f}; "
-          f"{len(times)} images); CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
+          f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}, "
+          f"mean {statistics.mean(times):.0f}; {len(times)} images); "
+          f"CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
     if not args.no_povray:
         from sasmi.scene import load_preset
 

@@ -127,7 +127,7 @@ def rocks(floor: Seafloor, chip_size: float, seed: int) -> tuple[tuple[float, fl
 
 def _draw_rocks(rng: np.random.Generator, floor: Seafloor, chip_size: float
                 ) -> tuple[tuple[float, float, float], ...]:
-    """(centre x, centre y, radius) in m per rock; the rock is a Gaussian bump of height = radius, sigma = radius / 2."""
+    """(centre x, centre y, radius) in m per rock (a Gaussian bump of height radius, sigma radius / 2)."""
     out = []
     for _ in range(floor.rocks):
         cx, cy = rng.uniform(-chip_size / 2, chip_size / 2, size=2)
