@@ -39,7 +39,7 @@ def resolve_device(name: str):
     return device
 
 
-def prepare_torch(threads: int | None) -> None:
+def apply_threads(threads: int | None) -> None:
     """Call before anything imports torch. Idle OpenMP threads then sleep instead of
     spinning: on a CPU that other jobs share, spinning threads took 8× the CPU time per
     SAS GAN step (7.5 against 0.9 CPU s at 2 threads, docs/gan.md, Speed).

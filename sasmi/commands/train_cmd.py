@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import functools
 
-from sasmi.commands.common import add_device, add_threads, prepare_torch, resolve_device
+from sasmi.commands.common import add_device, add_threads, apply_threads, resolve_device
 
 NETS = ("small", "paper")
 TRAINING_FLAGS = ("steps", "size", "batch", "lr", "seed", "betas", "checkpoint_every", "n_critic", "critic_lr",
@@ -99,7 +99,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    prepare_torch(args.threads)  # before torch is imported
+    apply_threads(args.threads)  # before torch is imported
     from gan.critic import CRITIC_NETS
     from gan.dcgan import DCGAN_NETS
     from gan.generator import GENERATOR_NETS

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sasmi.commands.common import add_device, add_generator, add_threads, check_batch, prepare_torch, resolve_device
+from sasmi.commands.common import add_device, add_generator, add_threads, apply_threads, check_batch, resolve_device
 
 
 def add_parser(subparsers) -> None:
@@ -21,7 +21,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    prepare_torch(args.threads)  # before torch is imported
+    apply_threads(args.threads)  # before torch is imported
     from gan.generator import load_generator
     from gan.translate import translate_folder
 
