@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from sasmi.commands.common import add_device, add_threads, prepare_torch, resolve_device
+from sasmi.commands.common import add_device, add_threads, apply_threads, resolve_device
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
         raise SasmiError(f"--minutes {args.minutes}: must be in (0, 10080]")
     if not 8 <= args.renders <= 1_000_000:
         raise SasmiError(f"--renders {args.renders}: must be in [8, 1000000]")
-    prepare_torch(args.threads)
+    apply_threads(args.threads)  # before torch is imported
     plan = with_defaults(FitPlan(real=args.real, out=args.out, phi_real=args.phi_real, validation=args.validation,
                                  minutes=args.minutes, size=args.size, preset=args.preset, renders=args.renders,
                                  seed=args.seed, gan=args.gan, phi=args.phi))
