@@ -18,7 +18,7 @@ from sasmi.cli import main
 
 from conftest import REPO
 
-PRESET = str(REPO / "scenes" / "cylinder_chip.toml")
+PRESET = str(REPO / "scenes" / "muscle_paper.toml")  # the render_set fixture's preset
 CPU = torch.device("cpu")
 
 
