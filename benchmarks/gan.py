@@ -31,13 +31,13 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from gan.critic import CRITIC_NETS  # noqa: E402
-from gan.dcgan import DCGAN_NETS  # noqa: E402
-from gan.generator import GENERATOR_NETS, Generator  # noqa: E402
-from gan.kinds.autoencoder import AUTOENCODER  # noqa: E402
-from gan.kinds.dcgan import DCGAN  # noqa: E402
-from gan.kinds.sasgan import SASGAN  # noqa: E402
-from gan.loop import train  # noqa: E402
+from sasmi.gan.critic import CRITIC_NETS  # noqa: E402
+from sasmi.gan.dcgan import DCGAN_NETS  # noqa: E402
+from sasmi.gan.generator import GENERATOR_NETS, Generator  # noqa: E402
+from sasmi.gan.kinds.autoencoder import AUTOENCODER  # noqa: E402
+from sasmi.gan.kinds.dcgan import DCGAN  # noqa: E402
+from sasmi.gan.kinds.sasgan import SASGAN  # noqa: E402
+from sasmi.gan.loop import train  # noqa: E402
 from sasmi.images import write_gray  # noqa: E402
 
 

@@ -23,7 +23,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from gan.run import config_from_dict, load_weights, read_run
+from sasmi.gan.run import config_from_dict, load_weights, read_run
 
 PHI_DIM = 1024
 PHI_GRID = 8  # PHI_DIM == widths[-1] * PHI_GRID**2

@@ -18,7 +18,7 @@ import torch
 import torch.nn.functional as F
 from PIL import Image
 
-from gan.run import fingerprint
+from sasmi.gan.run import fingerprint
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, read_gray
 from sasmi.preprocess import centre_crop, check_size, resize_short_side, unit_to_signed

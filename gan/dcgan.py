@@ -15,7 +15,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from gan.run import config_from_dict, load_weights, read_run
+from sasmi.gan.run import config_from_dict, load_weights, read_run
 from sasmi.preprocess import signed_to_unit
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn as nn
 
-from gan.run import config_from_dict, load_weights, read_run
+from sasmi.gan.run import config_from_dict, load_weights, read_run
 
 
 @dataclass(frozen=True)

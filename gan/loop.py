@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 import torch
 
-from gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
+from sasmi.gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
 from sasmi.errors import SasmiError
 
 Logs = dict[str, float]

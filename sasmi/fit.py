@@ -13,7 +13,7 @@ keeps its spread and the fitted preset scales each field (docs/differentiable.md
     sonar.elevation     altitude of the array        → sonar.altitude if set, else sonar.max_range
 
 Adam works on the logarithm of the scales, so every parameter moves by a similar relative
-step and stays positive. The loss is `gan.losses.phi_loss` with margin 0: the distance
+step and stays positive. The loss is `sasmi.gan.losses.phi_loss` with margin 0: the distance
 between the two mean φ vectors relative to the real one. The render is noise-free apart
 from, by default, the preset's speckle and additive noise as fields fixed per scene (real
 chips have speckle; without it φ would compare smooth renders with speckled chips).
@@ -210,7 +210,7 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
     """Adam on the log-scales of `cfg.params` so that mean φ of K renders approaches `target_phi` (D,)."""
     import torch
 
-    from gan.losses import phi_loss
+    from sasmi.gan.losses import phi_loss
     from sasmi.render.differentiable import DifferentiableRenderer, scene_parameters
 
     cfg = cfg.for_encoder(encoder).validate()
@@ -333,7 +333,7 @@ def write_fit(out: str | os.PathLike, preset: Preset, result: FitResult, record:
 def fit_to_real(preset_path: str | os.PathLike, phi_run: str | os.PathLike, real: str | os.PathLike,
                 cfg: FitConfig, out: str | os.PathLike, progress: bool = True) -> Path:
     """One call: fit `cfg.params` of a preset so its renders match the real chips' mean φ; write OUT."""
-    from gan.autoencoder import load_encoder
+    from sasmi.gan.autoencoder import load_encoder
     from sasmi.render.llvm import versions
     from sasmi.scene import load_preset
 

@@ -93,7 +93,7 @@ def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: f
 
     Each chunk is an ordinary resumed run (resume is exact), so a kill loses at most one chunk.
     """
-    from gan.loop import resolve_config, train
+    from sasmi.gan.loop import resolve_config, train
 
     deadline = time.monotonic() + seconds
     last = out / "checkpoints" / "last.pt"
@@ -106,7 +106,7 @@ def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: f
             chunk = max(1, min(int(left * 0.95 / per_step), 500))  # a progress line at least every 500 steps
         resume = last.is_file()
         if resume:
-            from gan.run import read_run
+            from sasmi.gan.run import read_run
 
             step = read_run(out, kind.name).step
         cfg = resolve_config(kind, out, {"steps": step + chunk} if resume else {**overrides, "steps": chunk}, resume)
@@ -122,8 +122,8 @@ def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: f
 
 def fit(plan: FitPlan, device) -> Path:
     """Run every stage not yet done; returns RUN/report/report.md."""
-    from gan.kinds.autoencoder import AUTOENCODER
-    from gan.kinds.sasgan import SASGAN
+    from sasmi.gan.kinds.autoencoder import AUTOENCODER
+    from sasmi.gan.kinds.sasgan import SASGAN
     from sasmi.preprocess import check_size
     from sasmi.scene import load_preset
 
@@ -142,7 +142,7 @@ def fit(plan: FitPlan, device) -> Path:
 
     phi = Path(plan.phi) if plan.phi else out / "phi"
     if plan.phi:
-        from gan.autoencoder import load_encoder
+        from sasmi.gan.autoencoder import load_encoder
 
         load_encoder(phi)  # a bad --phi fails here, not after the renders
     elif "phi" not in state.done:  # trained once: a φ that moved under a trained GAN would void its φ loss
@@ -168,8 +168,8 @@ def fit(plan: FitPlan, device) -> Path:
         state.done = [s for s in state.done if s not in ("translated", "report")]  # a longer GAN run: redo these
 
     if "translated" not in state.done:
-        from gan.generator import load_generator
-        from gan.translate import translate_folder
+        from sasmi.gan.generator import load_generator
+        from sasmi.gan.translate import translate_folder
 
         _log("translated", "renders through the generator", plan, state.used)
         started = time.monotonic()
@@ -212,8 +212,8 @@ def sasgan_settings(recipe: str) -> dict:
     import tomllib
     from dataclasses import fields, is_dataclass
 
-    from gan.kinds.sasgan import SasganRun
-    from gan.run import config_from_dict
+    from sasmi.gan.kinds.sasgan import SasganRun
+    from sasmi.gan.run import config_from_dict
 
     path = Path(recipe)
     if not path.is_file():
@@ -238,8 +238,8 @@ def sasgan_settings(recipe: str) -> dict:
 
 
 def recipes_folder() -> Path:
-    """The shipped SAS GAN recipes: package data of the gan package (gan/recipes/*.toml)."""
-    import gan
+    """The shipped SAS GAN recipes: package data of sasmi.gan (gan/recipes/*.toml in the repository)."""
+    from sasmi import gan
 
     return Path(gan.__file__).resolve().parent / "recipes"
 

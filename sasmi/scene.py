@@ -303,7 +303,16 @@ class Preset:
         return targets
 
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"  # the presets shipped beside the package
+def _shipped_folder() -> Path:
+    """The presets: package data `sasmi.scenes` (scenes/ at the top of the repository)."""
+    try:
+        from sasmi import scenes
+    except ImportError:  # a source tree used without installing it
+        return Path(__file__).resolve().parent.parent / "scenes"
+    return Path(scenes.__file__).resolve().parent
+
+
+SCENES = _shipped_folder()
 
 
 def shipped_presets() -> list[str]:

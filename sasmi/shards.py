@@ -151,7 +151,7 @@ def _decode(data: bytes):
 
 
 def read_shards(folder: str | Path, size: int, masks: bool = False) -> tuple[list, list | None]:
-    """Every sample of a wds render, in sample order, as gan.data.ImageSet holds a render set:
+    """Every sample of a wds render, in sample order, as sasmi.gan.data.ImageSet holds a render set:
     images (1, h, w) float32 in [0, 1] with short side `size`, and with masks=True the class
     masks (1, h, w) uint8 resized (nearest) to the same h, w; else None."""
     import torch

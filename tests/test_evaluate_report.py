@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.sasgan import SASGAN, SasganRun
-from gan.loop import train
-from gan.autoencoder import AutoencoderConfig, load_encoder
+from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.loop import train
+from sasmi.gan.autoencoder import AutoencoderConfig, load_encoder
 from sasmi import cli
 from sasmi.eval import features, phi_fid, preservation, sweeps
 from sasmi.errors import SasmiError
@@ -246,8 +246,8 @@ def test_preservation_on_the_renderer_output(render_set, tmp_path):
 
 @pytest.mark.slow
 def test_pose_sweep_through_mitsuba_and_a_trained_generator(data, tmp_path):
-    from gan.critic import CriticConfig
-    from gan.generator import GeneratorConfig
+    from sasmi.gan.critic import CriticConfig
+    from sasmi.gan.generator import GeneratorConfig
 
     cfg = SasganRun(steps=1, size=32, batch=2, n_critic=1, generator=GeneratorConfig(4, 1),
                           critic=CriticConfig(4), log_every=1, sample_every=10, checkpoint_every=10)

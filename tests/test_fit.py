@@ -37,7 +37,7 @@ def renderer() -> DifferentiableRenderer:
 @pytest.fixture(scope="module")
 def encoder() -> torch.nn.Module:
     """A randomly initialised φ encoder of the real architecture: random conv features see texture."""
-    from gan.autoencoder import AutoencoderConfig, Encoder
+    from sasmi.gan.autoencoder import AutoencoderConfig, Encoder
 
     torch.manual_seed(0)
     encoder = Encoder(AutoencoderConfig()).eval().requires_grad_(False)
@@ -76,7 +76,7 @@ def test_gradient_matches_central_difference(renderer, encoder, name):
     The relief is gentle enough not to shadow itself at these grazing angles: moving shadow
     edges are what AD misses (docs/differentiable.md has the ratios on rougher floors).
     """
-    from gan.losses import phi_loss
+    from sasmi.gan.losses import phi_loss
 
     scene = relief_preset(0.01, 0.005).sample(0, 0)
     bound = renderer.bind(scene, speckle=False)

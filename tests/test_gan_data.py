@@ -5,7 +5,7 @@ import tifffile
 import torch
 from PIL import Image
 
-from gan.data import Batches, ImageSet
+from sasmi.gan.data import Batches, ImageSet
 from sasmi.errors import SasmiError
 
 

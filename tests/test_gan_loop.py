@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 import torch
 
-from gan.autoencoder import AutoencoderConfig, load_encoder
-from gan.critic import Critic, CriticConfig
-from gan.data import ImageSet
-from gan.generator import GeneratorConfig
-from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.common import GanRun, Noise, critic_phase, critic_view
-from gan.kinds.sasgan import SASGAN, SasganRun
-from gan.loop import train
-from gan.losses import phi_loss
+from sasmi.gan.autoencoder import AutoencoderConfig, load_encoder
+from sasmi.gan.critic import Critic, CriticConfig
+from sasmi.gan.data import ImageSet
+from sasmi.gan.generator import GeneratorConfig
+from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.loop import train
+from sasmi.gan.losses import phi_loss
 from sasmi.images import write_gray
 from test_gan_train import make_render_set
 

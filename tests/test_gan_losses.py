@@ -2,8 +2,8 @@
 import torch
 import torch.nn.functional as F
 
-from gan.critic import Critic, CriticConfig
-from gan.losses import critic_loss, generator_loss, gradient_penalty, phi_loss, reconstruction_loss
+from sasmi.gan.critic import Critic, CriticConfig
+from sasmi.gan.losses import critic_loss, generator_loss, gradient_penalty, phi_loss, reconstruction_loss
 
 
 def test_wasserstein_terms():

@@ -2,10 +2,10 @@
 import pytest
 import torch
 
-from gan.autoencoder import PHI_DIM, Autoencoder, AutoencoderConfig
-from gan.critic import Critic, CriticConfig
-from gan.dcgan import DCGANConfig, DCGANGenerator, sample
-from gan.generator import GENERATOR_NETS, Generator, GeneratorConfig
+from sasmi.gan.autoencoder import PHI_DIM, Autoencoder, AutoencoderConfig
+from sasmi.gan.critic import Critic, CriticConfig
+from sasmi.gan.dcgan import DCGANConfig, DCGANGenerator, sample
+from sasmi.gan.generator import GENERATOR_NETS, Generator, GeneratorConfig
 
 
 @pytest.fixture(autouse=True)

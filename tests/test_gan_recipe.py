@@ -5,16 +5,16 @@ import numpy as np
 import pytest
 import torch
 
-from gan.augment import AugmentConfig, augment
-from gan.autoencoder import AutoencoderConfig
-from gan.critic import Critic, CriticConfig
-from gan.data import ImageSet
-from gan.generator import GeneratorConfig, load_generator
-from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.common import GanRun, Noise, critic_phase, critic_view
-from gan.kinds.sasgan import SASGAN, SasganRun
-from gan.loop import train
-from gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty
+from sasmi.gan.augment import AugmentConfig, augment
+from sasmi.gan.autoencoder import AutoencoderConfig
+from sasmi.gan.critic import Critic, CriticConfig
+from sasmi.gan.data import ImageSet
+from sasmi.gan.generator import GeneratorConfig, load_generator
+from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.loop import train
+from sasmi.gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
 from test_gan_train import make_render_set

@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 import torch
 
-import gan.kinds.autoencoder
-from gan.autoencoder import Autoencoder, AutoencoderConfig, load_encoder
-from gan.critic import CriticConfig
-from gan.data import ImageSet
-from gan.dcgan import DCGANConfig, load_dcgan, sample
-from gan.generator import GeneratorConfig, load_generator
-from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.dcgan import DCGAN, DcganRun
-from gan.kinds.sasgan import SASGAN, SasganRun
-from gan.loop import resolve_config, train
-from gan.losses import reconstruction_loss
-from gan.translate import translate, translate_folder
+import sasmi.gan.kinds.autoencoder
+from sasmi.gan.autoencoder import Autoencoder, AutoencoderConfig, load_encoder
+from sasmi.gan.critic import CriticConfig
+from sasmi.gan.data import ImageSet
+from sasmi.gan.dcgan import DCGANConfig, load_dcgan, sample
+from sasmi.gan.generator import GeneratorConfig, load_generator
+from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from sasmi.gan.kinds.dcgan import DCGAN, DcganRun
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.loop import resolve_config, train
+from sasmi.gan.losses import reconstruction_loss
+from sasmi.gan.translate import translate, translate_folder
 from sasmi.errors import SasmiError
 from sasmi.images import read_gray, write_gray, write_mask
 
@@ -153,7 +153,7 @@ def test_non_finite_loss_stops_and_keeps_the_last_good_checkpoint(tmp_path, chip
         loss = reconstruction_loss(reconstruction, target)
         return loss * float("nan") if len(calls) == 7 else loss
 
-    monkeypatch.setattr(gan.kinds.autoencoder, "reconstruction_loss", poisoned)
+    monkeypatch.setattr(sasmi.gan.kinds.autoencoder, "reconstruction_loss", poisoned)
     cfg = replace(TINY_AE, steps=20, checkpoint_every=5)
     with pytest.raises(SasmiError, match=r"step 7: non-finite loss/reconstruction = nan.*last good state \(step 5\)"):
         train_ae(cfg, tmp_path / "ae", chips)

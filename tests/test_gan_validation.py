@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 import torch
 
-from gan.autoencoder import AutoencoderConfig
-from gan.critic import CriticConfig
-from gan.generator import GeneratorConfig
-from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.sasgan import SASGAN, SasganRun
-from gan.loop import resolve_config, train
+from sasmi.gan.autoencoder import AutoencoderConfig
+from sasmi.gan.critic import CriticConfig
+from sasmi.gan.generator import GeneratorConfig
+from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.loop import resolve_config, train
 from sasmi.cli import main
 from sasmi.images import write_gray
 
@@ -153,8 +153,8 @@ def test_resume_reports_steps_honestly(tmp_path, capsys, runs):
 
 
 def test_checkpoint_every_sets_the_interval(tmp_path, runs, monkeypatch):
-    import gan.kinds.autoencoder as kind
-    from gan.losses import reconstruction_loss
+    import sasmi.gan.kinds.autoencoder as kind
+    from sasmi.gan.losses import reconstruction_loss
 
     calls = []
 
@@ -192,7 +192,7 @@ def test_config_travels_inside_the_checkpoint(runs):
 
 
 def test_checkpoints_from_before_the_config_moved_inside_still_load(tmp_path, runs):
-    from gan.generator import load_generator
+    from sasmi.gan.generator import load_generator
 
     run = tmp_path / "old"
     (run / "checkpoints").mkdir(parents=True)

@@ -8,12 +8,12 @@ import pytest
 import torch
 from PIL import Image
 
-from gan.autoencoder import AutoencoderConfig
-from gan.critic import CriticConfig
-from gan.generator import GeneratorConfig
-from gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
-from gan.kinds.sasgan import SASGAN, SasganRun
-from gan.loop import train
+from sasmi.gan.autoencoder import AutoencoderConfig
+from sasmi.gan.critic import CriticConfig
+from sasmi.gan.generator import GeneratorConfig
+from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.loop import train
 from sasmi.cli import main
 
 from conftest import REPO

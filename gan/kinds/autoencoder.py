@@ -6,12 +6,12 @@ from pathlib import Path
 
 import torch
 
-from gan.autoencoder import Autoencoder, AutoencoderConfig
-from gan.data import Batches, ImageSet
-from gan.kinds.common import before_after, grad_norm, spread
-from gan.loop import Kind, Logs, Phases
-from gan.losses import reconstruction_loss
-from gan.run import RunConfig
+from sasmi.gan.autoencoder import Autoencoder, AutoencoderConfig
+from sasmi.gan.data import Batches, ImageSet
+from sasmi.gan.kinds.common import before_after, grad_norm, spread
+from sasmi.gan.loop import Kind, Logs, Phases
+from sasmi.gan.losses import reconstruction_loss
+from sasmi.gan.run import RunConfig
 
 
 @dataclass(frozen=True)

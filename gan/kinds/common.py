@@ -6,12 +6,12 @@ from typing import Callable, Iterable
 
 import torch
 
-from gan.augment import AugmentConfig, augment
-from gan.critic import Critic, CriticConfig
-from gan.loop import Logs
-from gan.losses import (critic_loss, generator_loss, gradient_penalty, logistic_critic_loss, logistic_generator_loss,
+from sasmi.gan.augment import AugmentConfig, augment
+from sasmi.gan.critic import Critic, CriticConfig
+from sasmi.gan.loop import Logs
+from sasmi.gan.losses import (critic_loss, generator_loss, gradient_penalty, logistic_critic_loss, logistic_generator_loss,
                         r1_penalty)
-from gan.run import RunConfig, check_number
+from sasmi.gan.run import RunConfig, check_number
 from sasmi.errors import SasmiError
 
 REGULARISERS = ("gp", "r1")

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import torch
 
-from gan.critic import Critic
-from gan.data import Batches, ImageSet
-from gan.dcgan import DCGANConfig, DCGANGenerator, sample
-from gan.kinds.common import GanRun, Noise, adam, adversarial_loss, critic_phase, critic_view, grad_norm
-from gan.loop import Kind, Logs, Phases
-from gan.run import check_number
+from sasmi.gan.critic import Critic
+from sasmi.gan.data import Batches, ImageSet
+from sasmi.gan.dcgan import DCGANConfig, DCGANGenerator, sample
+from sasmi.gan.kinds.common import GanRun, Noise, adam, adversarial_loss, critic_phase, critic_view, grad_norm
+from sasmi.gan.loop import Kind, Logs, Phases
+from sasmi.gan.run import check_number
 from sasmi.images import write_gray
 
 

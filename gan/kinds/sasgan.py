@@ -8,15 +8,15 @@ from pathlib import Path
 import torch
 from torch.optim.swa_utils import AveragedModel
 
-from gan.autoencoder import load_encoder
-from gan.critic import Critic
-from gan.data import Batches, ImageSet
-from gan.generator import Generator, GeneratorConfig
-from gan.kinds.common import (GanRun, Noise, adam, adversarial_loss, before_after, critic_phase, critic_view,
+from sasmi.gan.autoencoder import load_encoder
+from sasmi.gan.critic import Critic
+from sasmi.gan.data import Batches, ImageSet
+from sasmi.gan.generator import Generator, GeneratorConfig
+from sasmi.gan.kinds.common import (GanRun, Noise, adam, adversarial_loss, before_after, critic_phase, critic_view,
                               grad_norm, spread)
-from gan.loop import Kind, Logs, Phases
-from gan.losses import mask_contrast_loss, phi_loss
-from gan.run import check_number, file_fingerprint
+from sasmi.gan.loop import Kind, Logs, Phases
+from sasmi.gan.losses import mask_contrast_loss, phi_loss
+from sasmi.gan.run import check_number, file_fingerprint
 from sasmi.errors import SasmiError
 
 

@@ -29,8 +29,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)  # before torch is imported
-    from gan.generator import load_generator
-    from gan.translate import translate
+    from sasmi.gan.generator import load_generator
+    from sasmi.gan.translate import translate
     from sasmi.dataset import RenderJob, render_set
     from sasmi.scene import load_preset
 

@@ -18,9 +18,9 @@ TRAINING_FLAGS = ("steps", "size", "batch", "lr", "seed", "betas", "checkpoint_e
 
 def _kind(name: str):
     """The CLI edge: the one place a run kind is chosen by its name."""
-    from gan.kinds.autoencoder import AUTOENCODER
-    from gan.kinds.dcgan import DCGAN
-    from gan.kinds.sasgan import SASGAN
+    from sasmi.gan.kinds.autoencoder import AUTOENCODER
+    from sasmi.gan.kinds.dcgan import DCGAN
+    from sasmi.gan.kinds.sasgan import SASGAN
 
     return {"autoencoder": AUTOENCODER, "sasgan": SASGAN, "dcgan": DCGAN}[name]
 
@@ -100,11 +100,11 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)  # before torch is imported
-    from gan.critic import CRITIC_NETS
-    from gan.dcgan import DCGAN_NETS
-    from gan.generator import GENERATOR_NETS
-    from gan.kinds.sasgan import SASGAN
-    from gan.loop import resolve_config, train
+    from sasmi.gan.critic import CRITIC_NETS
+    from sasmi.gan.dcgan import DCGAN_NETS
+    from sasmi.gan.generator import GENERATOR_NETS
+    from sasmi.gan.kinds.sasgan import SASGAN
+    from sasmi.gan.loop import resolve_config, train
 
     kind = _kind(args.kind)
     inputs = {"real": args.real} | ({"renders": args.renders, "phi": args.phi} if kind is SASGAN else {})
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     if "betas" in overrides:
         overrides["betas"] = tuple(overrides["betas"])
     if getattr(args, "augment", False):
-        from gan.augment import AugmentConfig
+        from sasmi.gan.augment import AugmentConfig
 
         overrides["augment"] = AugmentConfig.recommended()
     if getattr(args, "net", None):

@@ -22,8 +22,8 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)  # before torch is imported
-    from gan.generator import load_generator
-    from gan.translate import translate_folder
+    from sasmi.gan.generator import load_generator
+    from sasmi.gan.translate import translate_folder
 
     check_batch(args.batch)
     generator = load_generator(args.generator, resolve_device(args.device), args.checkpoint)

@@ -1,6 +1,6 @@
 """Images and their φ features: the input of every metric.
 
-φ is the 1024-d code of the GAN's autoencoder (`gan.autoencoder.load_encoder`). Images go
+φ is the 1024-d code of the GAN's autoencoder (`sasmi.gan.autoencoder.load_encoder`). Images go
 through `sasmi.preprocess.load_image` (short side to the encoder's size, centre crop),
 the same path as training, so the encoder sees what it was trained on.
 """
@@ -30,7 +30,7 @@ class FeatureSet:
 def as_encoder(phi, device="cpu"):
     """An encoder as is, or the encoder of an autoencoder run folder."""
     if isinstance(phi, (str, os.PathLike)):
-        from gan.autoencoder import load_encoder
+        from sasmi.gan.autoencoder import load_encoder
 
         if not Path(phi).is_dir():
             raise SasmiError(f"--phi {phi}: not a folder (expected an autoencoder run)")

@@ -48,7 +48,7 @@ class StderrLog:
 
 def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi, batch: int = 32, device="cpu") -> float:
     """One call: φ-FID between two image folders; `phi` an autoencoder run folder or an encoder
-    (gan.autoencoder.load_encoder)."""
+    (sasmi.gan.autoencoder.load_encoder)."""
     encoder = as_encoder(phi, device)
     return metrics.fid(load_set("real", real, encoder, batch).phi, load_set("fake", fake, encoder, batch).phi)
 

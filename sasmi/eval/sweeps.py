@@ -84,8 +84,8 @@ def _pose_numbers(m: dict) -> dict:
 def pose_sweep_from_runs(preset: str | os.PathLike, generator_run: str | os.PathLike, out_dir: str | os.PathLike,
                          cfg: SweepConfig = SweepConfig(), device="cpu") -> Report:
     """Pose sweeps of a preset's first target through a trained SAS GAN (renders with Mitsuba)."""
-    from gan.generator import load_generator
-    from gan.translate import translate
+    from sasmi.gan.generator import load_generator
+    from sasmi.gan.translate import translate
     from sasmi.render import Renderer
     from sasmi.scene import load_preset
 

@@ -1,0 +1,1 @@
+"""The shipped scene presets (TOML files beside this file), installed as `sasmi.scenes`."""
