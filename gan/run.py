@@ -150,9 +150,12 @@ def read_checkpoint(path: Path, kind: str) -> Saved:
 
 
 def read_run(run_dir: str | os.PathLike, kind: str, which: str = "last") -> Saved:
-    """checkpoints/{which}.pt of a `kind` run folder. A run shorter than one checkpoint
-    interval has no best.pt yet; `which="best"` then reads last.pt."""
+    """checkpoints/{which}.pt of a `kind` run folder, `which` being "last", "best" or a
+    checkpoint file's path. A run shorter than one checkpoint interval has no best.pt yet;
+    `which="best"` then reads last.pt."""
     run_dir = Path(run_dir)
+    if which not in ("last", "best"):
+        return read_checkpoint(Path(which), kind)
     if not (run_dir / "checkpoints" / "last.pt").is_file():
         raise SasmiError(f"{run_dir}: not a training run (no checkpoints/last.pt)")
     path = run_dir / "checkpoints" / f"{which}.pt"

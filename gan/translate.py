@@ -10,6 +10,7 @@ import json
 import os
 import shutil
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,8 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.images import atomic_path, list_images, read_gray, write_gray, write_text
+from sasmi.images import list_images, read_gray, write_gray, write_text
+from sasmi.labels import read_labels
 from sasmi.preprocess import resize, signed_to_unit, unit_to_signed
 
 MULTIPLE = 4  # the generator's two stride-2 stages
@@ -92,8 +94,10 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
         if render_set and (in_dir / masks).is_dir():
             shutil.copytree(in_dir / masks, out_dir / masks, dirs_exist_ok=True)
     if render_set and (in_dir / "labels.jsonl").is_file():
-        with atomic_path(out_dir / "labels.jsonl") as tmp:
-            shutil.copyfile(in_dir / "labels.jsonl", tmp)
+        # the translations are PNGs whatever the renders were (tiff16, npy): point the labels at them
+        labels = [replace(label, image=str(Path(label.image).with_suffix(".png")) if label.image else label.image)
+                  for label in read_labels(in_dir)]
+        write_text(out_dir / "labels.jsonl", "".join(label.dumps() + "\n" for label in labels))
     write_text(out_dir / "translate.json", json.dumps(
         {"input": str(in_dir.resolve()), "images": written, **(provenance or {})}, indent=2) + "\n")
     return written

@@ -69,3 +69,21 @@ def test_generate_bad_generator_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "nope" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_translating_a_tiff16_set_points_its_labels_at_the_pngs(tmp_path, generator_runs):
+    renders = tmp_path / "tiff"
+    assert main(["render", PRESET, "--out", str(renders), "--count", "2", "--size", "32", "--spp", "2",
+                 "--format", "tiff16"]) == 0
+    out = tmp_path / "translated"
+    assert main(["translate", "--generator", str(generator_runs[0]), "--in", str(renders), "--out", str(out)]) == 0
+    for line in (out / "labels.jsonl").read_text().splitlines():
+        assert (out / json.loads(line)["image"]).is_file()
+
+
+def test_generate_defaults_to_the_generators_size_and_takes_a_checkpoint_path(tmp_path, generator_runs):
+    out = tmp_path / "gen"
+    checkpoint = generator_runs[0] / "checkpoints" / "last.pt"
+    assert main(["generate", PRESET, "--generator", str(generator_runs[0]), "--checkpoint", str(checkpoint),
+                 "--out", str(out), "--count", "1", "--spp", "2"]) == 0
+    assert json.loads((out / "run.json").read_text())["size"] == 32  # the generator was trained at 32 px

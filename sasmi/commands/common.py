@@ -18,8 +18,9 @@ def add_threads(p: argparse.ArgumentParser) -> None:
 
 def add_generator(p: argparse.ArgumentParser) -> None:
     p.add_argument("--generator", required=True, metavar="RUN", help="a `sasmi train sasgan` run folder")
-    p.add_argument("--checkpoint", choices=("last", "best"), default="last",
-                   help="which checkpoint of the run (default last)")
+    p.add_argument("--checkpoint", default="last", metavar="last|best|PATH",
+                   help="last: the end of training; best: the step with the lowest averaged score "
+                        "(docs/gan.md); or a checkpoint file")
 
 
 def resolve_device(name: str):

@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--count", type=int, default=16, help="number of scenes (default 16)")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--seed", type=int, default=0, help="scene i depends only on (seed, i) (default 0)")
-    p.add_argument("--size", type=int, default=256, help="render size, a multiple of 16 (default 256)")
+    p.add_argument("--size", type=int, help="render size, a multiple of 16 (default: the size the generator "
+                                            "was trained at; another size is resampled to it and back)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
     p.add_argument("--workers", type=int, default=1, help="render processes (default 1)")
     p.add_argument("--batch", type=int, default=16, help="images per generator pass (default 16)")
@@ -35,12 +36,13 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.scene import load_preset
 
     check_batch(args.batch)
-    job = RenderJob(preset=load_preset(args.preset), out=args.out, count=args.count, seed=args.seed,
-                    size=args.size, spp=args.spp, workers=args.workers).validate()
+    preset = load_preset(args.preset)
     generator = load_generator(args.generator, resolve_device(args.device), args.checkpoint)
+    job = RenderJob(preset=preset, out=args.out, count=args.count, seed=args.seed,
+                    size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
     identity = {"generator": str(Path(args.generator).resolve()),
                 "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
     render_set(job, transform=lambda images: translate(generator, images, args.batch), identity=identity,
                batch=args.batch)
-    print(f"wrote {args.count} translated chips with masks and labels to {args.out}")
+    print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}")
     return 0
