@@ -13,14 +13,14 @@ import os
 import warnings
 from pathlib import Path
 
-import numpy as np
 import torch
 import torch.nn.functional as F
-from PIL import Image
 
 from sasmi.gan.run import fingerprint
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, read_gray
+from sasmi.masks import read_mask
+from sasmi.shards import has_shards, read_shards, shard_files
 from sasmi.preprocess import centre_crop, check_size, resize_short_side, unit_to_signed
 
 
@@ -38,6 +38,10 @@ class ImageSet:
         self.paths: list[Path] = []
         self.images: list[torch.Tensor] = []  # each (1, h, w) in [0, 1], min(h, w) == size
         self.masks: list[torch.Tensor] | None = [] if masks else None  # each (1, h, w) uint8 labels
+        if has_shards(self.folder):  # a `sasmi render --format wds` set: images (and masks) from its tar shards
+            self.images, self.masks = read_shards(self.folder, size, masks)
+            self.paths = shard_files(self.folder)  # the fingerprint covers the tar files
+            return
         if masks and not (self.folder / "masks").is_dir():
             raise SasmiError(f"{self.folder}: no masks/ folder; the mask loss needs a render set")
         for path in list_images(self.folder):
@@ -67,14 +71,8 @@ class ImageSet:
 
 def _read_mask(folder: Path, image_path: Path, shape: tuple[int, int]) -> torch.Tensor:
     """masks/NAME.png of a render set's images/NAME.*, resized (nearest) to `shape`: (1, h, w) uint8."""
-    try:
-        path = (folder / "masks" / image_path.relative_to(folder / "images")).with_suffix(".png")
-        with Image.open(path) as im:
-            if im.mode not in ("P", "L"):  # palette PNGs (as sasmi writes them) hold the ids as indices
-                raise ValueError(f"a mask must be a palette or 8-bit gray PNG, not mode {im.mode}")
-            mask = torch.from_numpy(np.asarray(im, dtype=np.uint8).copy())[None, None]
-    except (OSError, ValueError) as e:
-        raise SasmiError(f"{folder / 'masks'}: cannot read the mask of {image_path.name} ({e})") from None
+    path = (folder / "masks" / image_path.relative_to(folder / "images")).with_suffix(".png")
+    mask = torch.from_numpy(read_mask(path))[None, None]  # ids, never palette colours
     return F.interpolate(mask.float(), size=tuple(shape), mode="nearest")[0].to(torch.uint8)
 
 

@@ -126,3 +126,16 @@ def test_broken_shard_is_one_error(tmp_path):
     (tmp_path / "shards" / "shard-000000.tar").write_bytes(b"not a tar" * 100)
     with pytest.raises(SasmiError, match="unreadable shard"):
         read_shard_images(tmp_path, 16)
+
+
+def test_sasgan_trains_on_a_shard_set(tmp_path):
+    """`sasmi train sasgan --renders` takes a `--format wds` render set, masks included."""
+    from sasmi.gan.data import ImageSet
+
+    out = tmp_path / "wds"
+    assert main(["render", str(PRESET), "--out", str(out), "--count", "3", "--size", "32", "--spp", "2",
+                 "--format", "wds", "--per-shard", "2"]) == 0
+    images = ImageSet(out, 32, masks=True)
+    assert len(images) == 3 and images.masks[0].shape == (1, 32, 32)
+    assert set(images.masks[0].unique().tolist()) <= {0, 1, 2}
+    assert [p.suffix for p in images.paths] == [".tar", ".tar"]
