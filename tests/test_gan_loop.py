@@ -20,7 +20,7 @@ from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.loop import train
 from sasmi.gan.losses import phi_loss
 from sasmi.images import write_gray
-from test_gan_train import make_render_set
+from test_gan_train import toy_gan_inputs
 
 CPU = torch.device("cpu")
 SIZE = 32
@@ -69,15 +69,7 @@ def test_gradient_penalty_keeps_the_critic_near_1_lipschitz():
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     """'Real' speckle chips, renders (disc + shadow), and a φ autoencoder trained 30 steps on the real ones."""
-    root = tmp_path_factory.mktemp("loop")
-    rng = np.random.default_rng(0)
-    for i in range(8):
-        write_gray(root / "real" / f"{i}.png", np.clip(rng.gamma(2.0, 0.25, (SIZE, SIZE)), 0, 1))
-    renders = make_render_set(root / "renders", n=8, size=SIZE)
-    ae_cfg = AutoencoderRun(steps=30, size=SIZE, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
-                            sample_every=100, checkpoint_every=100)
-    phi = train(AUTOENCODER, ae_cfg, root / "ae", {"real": root / "real"}, CPU).out
-    return {"real": root / "real", "renders": renders, "phi": phi}
+    return toy_gan_inputs(tmp_path_factory.mktemp("loop"), SIZE, phi_steps=30)
 
 
 def _phases(data, **overrides):

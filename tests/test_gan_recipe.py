@@ -17,7 +17,7 @@ from sasmi.gan.loop import train
 from sasmi.gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
-from test_gan_train import make_render_set
+from test_gan_train import toy_gan_inputs
 
 CPU = torch.device("cpu")
 SIZE = 32
@@ -55,15 +55,7 @@ def test_augment_is_differentiable_and_translates_and_cuts_out():
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
-    root = tmp_path_factory.mktemp("recipe")
-    rng = np.random.default_rng(0)
-    for i in range(8):
-        write_gray(root / "real" / f"{i}.png", np.clip(rng.gamma(2.0, 0.25, (SIZE, SIZE)), 0, 1))
-    renders = make_render_set(root / "renders", n=8, size=SIZE)
-    ae_cfg = AutoencoderRun(steps=10, size=SIZE, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
-                            sample_every=100, checkpoint_every=100)
-    phi = train(AUTOENCODER, ae_cfg, root / "ae", {"real": root / "real"}, CPU).out
-    return {"real": root / "real", "renders": renders, "phi": phi}
+    return toy_gan_inputs(tmp_path_factory.mktemp("recipe"), SIZE, phi_steps=10)
 
 
 TOY = SasganRun(size=SIZE, batch=4, n_critic=1, generator=GeneratorConfig(4, 1), critic=CriticConfig(4))

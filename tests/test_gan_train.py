@@ -43,6 +43,18 @@ def train_dcgan(cfg, out, real, resume=False):
     return train(DCGAN, cfg, out, {"real": real}, CPU, resume).out
 
 
+def toy_gan_inputs(root: Path, size: int, phi_steps: int) -> dict:
+    """'Real' speckle chips, a render set (disc + shadow) and a φ autoencoder trained `phi_steps` on the real ones."""
+    rng = np.random.default_rng(0)
+    for i in range(8):
+        write_gray(root / "real" / f"{i}.png", np.clip(rng.gamma(2.0, 0.25, (size, size)), 0, 1))
+    renders = make_render_set(root / "renders", n=8, size=size)
+    ae_cfg = AutoencoderRun(steps=phi_steps, size=size, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
+                            sample_every=100, checkpoint_every=100)
+    phi = train(AUTOENCODER, ae_cfg, root / "ae", {"real": root / "real"}, CPU).out
+    return {"real": root / "real", "renders": renders, "phi": phi}
+
+
 def make_render_set(folder: Path, n: int = 6, size: int = 48, seed: int = 0) -> Path:
     """A render set as `sasmi render` writes it: seafloor, a bright target, its shadow to the right."""
     rng = np.random.default_rng(seed)

@@ -59,3 +59,20 @@ def check_batch(batch: int) -> int:
     if not 1 <= batch <= 1024:
         raise SasmiError(f"--batch {batch}: must be an integer in [1, 1024]")
     return batch
+
+
+def add_translation_flags(p: argparse.ArgumentParser) -> None:
+    """What every command that runs a generator takes: which one, batch, device, threads."""
+    add_generator(p)
+    p.add_argument("--batch", type=int, default=16, help="images per generator pass")
+    add_device(p)
+    add_threads(p)
+
+
+def generator_from(args: argparse.Namespace):
+    """The generator the translation flags name, in eval mode on its device (torch is imported here)."""
+    apply_threads(args.threads)  # before torch is imported
+    check_batch(args.batch)
+    from sasmi.gan.generator import load_generator
+
+    return load_generator(args.generator, resolve_device(args.device), args.checkpoint)

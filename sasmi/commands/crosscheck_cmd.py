@@ -1,4 +1,9 @@
-"""`sasmi crosscheck PRESET --out DIR`: render one scene with Mitsuba and with POV-Ray, compare."""
+"""`sasmi crosscheck PRESET --out DIR`: render one scene with Mitsuba and with POV-Ray, compare.
+
+Writes mitsuba.png, povray.png, diff.png, side_by_side.png, scene.pov and metrics.json to DIR and
+prints the metrics. Exit status 1 when a check fails. Needs Debian's povray (`make setup` installs
+it).
+"""
 from __future__ import annotations
 
 import argparse
@@ -7,9 +12,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("crosscheck", help="render one scene with Mitsuba and POV-Ray and compare them",
-                       description="Writes mitsuba.png, povray.png, diff.png, side_by_side.png, scene.pov and "
-                                   "metrics.json to DIR and prints the metrics. Exit status 1 when a check fails. "
-                                   "Needs Debian's povray (`make setup` installs it).")
+                       description=__doc__)
     p.add_argument("preset", type=Path, help="scene preset (TOML), e.g. scenes/cylinder_chip.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--index", type=int, default=0, help="which scene of the preset (default 0)")

@@ -1,4 +1,9 @@
-"""`sasmi fit-scene PRESET --phi RUN --real DIR --params a,b --steps N --out DIR`."""
+"""`sasmi fit-scene PRESET --phi RUN --real DIR --params a,b --steps N --out DIR`.
+
+Adjust scale factors on a preset's parameters by gradient descent so that the mean φ of its renders
+approaches the mean φ of real chips. Writes trajectory.csv, loss.png, fitted.toml (a preset for
+`sasmi render`) and fit.json. See docs/differentiable.md.
+"""
 from __future__ import annotations
 
 import argparse
@@ -11,10 +16,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     defaults = FitConfig()
     p = sub.add_parser("fit-scene", help="fit scene parameters to real chips through the differentiable render",
-                       description="Adjust scale factors on a preset's parameters by gradient descent so that the "
-                                   "mean φ of its renders approaches the mean φ of real chips. Writes "
-                                   "trajectory.csv, loss.png, fitted.toml (a preset for `sasmi render`) and "
-                                   "fit.json. See docs/differentiable.md.")
+                       description=__doc__)
     p.add_argument("preset", type=Path, help="scene preset (TOML) to start from")
     p.add_argument("--phi", type=Path, required=True, metavar="RUN", help="a trained autoencoder run (φ)")
     p.add_argument("--real", type=Path, required=True, metavar="DIR", help="real chips, searched recursively")

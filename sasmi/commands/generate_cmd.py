@@ -1,20 +1,22 @@
-"""`sasmi generate PRESET --generator RUN --count N --out DIR`: render and translate, streamed."""
+"""`sasmi generate PRESET --generator RUN --count N --out DIR`: render and translate, streamed.
+
+Render scenes 0..N-1 of a preset and pass each batch through a SAS GAN generator; writes a render
+set (images/, masks/, labels.jsonl, run.json) whose images are the translations. Rerunning the same
+command resumes.
+"""
 from __future__ import annotations
 
 import argparse
 import hashlib
 from pathlib import Path
 
-from sasmi.commands.common import add_device, add_generator, add_threads, apply_threads, check_batch, resolve_device
+from sasmi.commands.common import add_translation_flags, generator_from
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("generate", help="render scenes and translate them with a trained SAS GAN, labels kept",
-                       description="Render scenes 0..N-1 of a preset and pass each batch through a SAS GAN "
-                                   "generator; writes a render set (images/, masks/, labels.jsonl, run.json) whose "
-                                   "images are the translations. Rerunning the same command resumes.")
+                       description=__doc__)
     p.add_argument("preset", type=Path, help="scene preset (TOML)")
-    add_generator(p)
     p.add_argument("--count", type=int, default=16, help="number of scenes (default 16)")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--seed", type=int, default=0, help="scene i depends only on (seed, i) (default 0)")
@@ -22,22 +24,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                             "was trained at; another size is resampled to it and back)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
     p.add_argument("--workers", type=int, default=1, help="render processes (default 1)")
-    p.add_argument("--batch", type=int, default=16, help="images per generator pass (default 16)")
-    add_device(p)
-    add_threads(p)
+    add_translation_flags(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    apply_threads(args.threads)  # before torch is imported
-    from sasmi.gan.generator import load_generator
-    from sasmi.gan.translate import translate
     from sasmi.dataset import RenderJob, render_set
     from sasmi.scene import load_preset
 
-    check_batch(args.batch)
     preset = load_preset(args.preset)
-    generator = load_generator(args.generator, resolve_device(args.device), args.checkpoint)
+    generator = generator_from(args)
+    from sasmi.gan.translate import translate
     job = RenderJob(preset=preset, out=args.out, count=args.count, seed=args.seed,
                     size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
     identity = {"generator": str(Path(args.generator).resolve()),

@@ -1,4 +1,9 @@
-"""`sasmi split ROOT --out DIR`: train / validation folders by scene group, linking to the real chips."""
+"""`sasmi split ROOT --out DIR`: train / validation folders by scene group, linking to the real chips.
+
+Assign whole scene groups of ROOT/MANIFEST.csv to train (~1 - fraction) and validation (~fraction),
+balanced per category; write DIR/{train,validation}/CATEGORY/ as links to the real chips and
+DIR/split.json. Deterministic.
+"""
 from __future__ import annotations
 
 import argparse
@@ -7,9 +12,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("split", help="split a chip folder into train and validation by MANIFEST scene_group",
-                       description="Assign whole scene groups of ROOT/MANIFEST.csv to train (~1 - fraction) and "
-                                   "validation (~fraction), balanced per category; write DIR/{train,validation}/"
-                                   "CATEGORY/ as links to the real chips and DIR/split.json. Deterministic.")
+                       description=__doc__)
     p.add_argument("root", type=Path, help="chip folder with MANIFEST.csv (file, category, scene_group columns)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (train/ and validation/ "
                                                                           "must not exist yet)")

@@ -4,29 +4,23 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sasmi.commands.common import add_device, add_generator, add_threads, apply_threads, check_batch, resolve_device
+from sasmi.commands.common import add_translation_flags, generator_from
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("translate", help="make renders look real with a trained SAS GAN generator",
                               description="Output mirrors the input names as PNG; a render set's masks/ and "
                                           "labels.jsonl are copied so its labels still apply.")
-    add_generator(p)
     p.add_argument("--in", dest="in_dir", required=True, metavar="DIR", help="a render set or a folder of images")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--batch", type=int, default=16, help="images per forward pass (default 16)")
-    add_device(p)
-    add_threads(p)
+    add_translation_flags(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    apply_threads(args.threads)  # before torch is imported
-    from sasmi.gan.generator import load_generator
+    generator = generator_from(args)
     from sasmi.gan.translate import translate_folder
 
-    check_batch(args.batch)
-    generator = load_generator(args.generator, resolve_device(args.device), args.checkpoint)
     n = translate_folder(generator, args.in_dir, args.out, args.batch,
                          provenance={"generator": str(Path(args.generator).resolve()),
                                      "checkpoint": str(generator.checkpoint)})
