@@ -1,0 +1,60 @@
+"""Render | translation | nearest real chip (in φ) for a dozen chips: the README's GAN figure.
+
+    .venv/bin/python benchmarks/triptych.py --renders RUN/renders --translated RUN/translated \
+        --real runs/split/validation/targets --phi RUN/phi --out docs/figures/sasgan_triptych.png [--count 12]
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from sasmi.eval.features import as_encoder, load_set
+from sasmi.images import list_images, read_gray
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--renders", type=Path, required=True)
+    ap.add_argument("--translated", type=Path, required=True)
+    ap.add_argument("--real", type=Path, required=True)
+    ap.add_argument("--phi", type=Path, required=True)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--count", type=int, default=12)
+    args = ap.parse_args()
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sasmi.eval.report import save_figure
+
+    encoder = as_encoder(args.phi)
+    real = load_set("real", args.real, encoder)
+    translated = load_set("translated", args.translated, encoder)
+    names = [p.stem for p in list_images(args.translated)]
+    renders = {p.stem: p for p in list_images(args.renders)}  # a translation keeps its render's name
+    picks = np.linspace(0, len(names) - 1, args.count).round().astype(int)
+    d = ((translated.phi[picks, None, :] - real.phi[None, :, :]) ** 2).sum(-1)  # (count, N_real)
+    nearest = d.argmin(1)
+
+    fig, axes = plt.subplots(3, args.count, figsize=(1.3 * args.count, 4.1))
+    for col, (i, j) in enumerate(zip(picks, nearest)):
+        render = read_gray(renders[names[i]])
+        for row, (image, title) in enumerate(((render, "render"), (translated.images[i], "translation"),
+                                              (real.images[j], "nearest real"))):
+            ax = axes[row, col]
+            ax.imshow(image, cmap="gray", vmin=0, vmax=1)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if col == 0:
+                ax.set_ylabel(title, fontsize=9)
+    fig.tight_layout(pad=0.2)
+    save_figure(fig, args.out)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
