@@ -20,6 +20,7 @@ from sasmi.gan.loop import resolve_config, train
 from sasmi.gan.losses import reconstruction_loss
 from sasmi.gan.translate import translate, translate_folder
 from sasmi.errors import SasmiError
+from sasmi.labels import ChipLabel, TargetLabel
 from sasmi.images import read_gray, write_gray, write_mask
 
 CPU = torch.device("cpu")
@@ -70,7 +71,10 @@ def make_render_set(folder: Path, n: int = 6, size: int = 48, seed: int = 0) -> 
         mask[target], mask[shadow] = 1, 2
         write_gray(folder / "images" / f"{i:06d}.png", image)
         write_mask(folder / "masks" / f"{i:06d}.png", mask)
-        labels.append(json.dumps({"image": f"{i:06d}.png", "target": "cylinder", "cx": cx, "cy": cy}))
+        target_label = TargetLabel(params={"shape": "cylinder"}, pixel_centre=(cx, cy),
+                                   bbox=(cx - r, cy - r, cx + r, cy + r), shadow_bbox=(cx + r, cy - r, cx + 4 * r, cy + r))
+        labels.append(ChipLabel(index=i, size=size, scene={}, targets=(target_label,), image=f"images/{i:06d}.png",
+                                mask=f"masks/{i:06d}.png").dumps())
     (folder / "labels.jsonl").write_text("\n".join(labels) + "\n")
     (folder / "run.json").write_text("{}\n")
     return folder
