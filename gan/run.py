@@ -33,6 +33,21 @@ from sasmi.preprocess import check_size, signed_to_unit
 MAX_SIZE = 1024  # every image of a set is held in memory at S²: 1000 images at 1024² are 4 GB
 
 
+def provenance() -> dict:
+    """What made a run: versions, the source commit (when run from a git checkout) and the command line."""
+    import subprocess
+    import sys
+
+    from sasmi import __version__
+
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).resolve().parent, capture_output=True,
+                                text=True, timeout=5).stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        commit = None
+    return {"sasmi": __version__, "torch": torch.__version__, "git_commit": commit, "command": sys.argv}
+
+
 def check_number(flag: str, value, low: float, high: float, integer: bool = False, why: str = "") -> None:
     """A SasmiError naming `flag` unless `value` is a finite number in [low, high]."""
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
@@ -208,7 +223,7 @@ class RunFolder:
         if resume:
             self._load()
         write_text(self.out / "config.json", json.dumps(
-            {"kind": kind, "config": asdict(cfg), "inputs": self.inputs}, indent=2) + "\n")
+            {"kind": kind, "config": asdict(cfg), "inputs": self.inputs, "provenance": provenance()}, indent=2) + "\n")
         if not resume:
             self._save("last")  # so a run that fails at once still has a good state to resume
         from torch.utils.tensorboard import SummaryWriter

@@ -122,7 +122,10 @@ def test_autoencoder_overfits_a_batch_of_8(chips):
 
 def test_sasgan_run_writes_checkpoints_samples_and_log(tmp_path, chips, renders, ae_run):
     out = train_sasgan(TINY_SASGAN, tmp_path / "sasgan", chips, renders, ae_run)
-    assert json.loads((out / "config.json").read_text())["config"]["phi_margin"] == TINY_SASGAN.phi_margin
+    record = json.loads((out / "config.json").read_text())
+    assert record["config"]["phi_margin"] == TINY_SASGAN.phi_margin
+    assert record["provenance"]["torch"] == torch.__version__ and len(record["provenance"]["git_commit"] or "") == 40
+    assert record["provenance"]["sasmi"] and record["provenance"]["command"]
     assert sorted(p.name for p in (out / "samples").iterdir()) == ["step_000010.png", "step_000020.png"]
     assert read_gray(out / "samples" / "step_000020.png").shape == (2 * 34 + 2, 6 * 34 + 2)  # renders | outputs
     assert list((out / "tb").glob("events.out.tfevents.*"))
