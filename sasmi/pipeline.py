@@ -95,9 +95,12 @@ def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: f
     """
     from sasmi.gan.loop import resolve_config, train
 
+    from sasmi.gan.run import read_run
+
     deadline = time.monotonic() + seconds
     last = out / "checkpoints" / "last.pt"
-    step, chunk, per_step = 0, FIRST_CHUNK, None
+    step = read_run(out, kind.name).step if last.is_file() else 0  # a killed run's step; later chunks know theirs
+    chunk, per_step = FIRST_CHUNK, None
     while True:
         left = deadline - time.monotonic()
         if per_step is not None:
@@ -105,10 +108,6 @@ def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: f
                 break
             chunk = max(1, min(int(left * 0.95 / per_step), 500))  # a progress line at least every 500 steps
         resume = last.is_file()
-        if resume:
-            from sasmi.gan.run import read_run
-
-            step = read_run(out, kind.name).step
         cfg = resolve_config(kind, out, {"steps": step + chunk} if resume else {**overrides, "steps": chunk}, resume)
         started = time.monotonic()
         done = train(kind, cfg, out, inputs, device, resume)
