@@ -187,7 +187,7 @@ def fit(plan: FitPlan, device) -> Path:
 def report(plan: FitPlan, device) -> Path:
     import functools
 
-    from sasmi.commands.evaluate_cmd import median_statistics
+    from sasmi.stats import median_statistics
     from sasmi.eval import report as rep
     from sasmi.eval.features import as_encoder
     from sasmi.eval.run import StderrLog, evaluate_folders

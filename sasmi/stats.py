@@ -237,3 +237,8 @@ def chip_statistics(folder: str | os.PathLike, size: int = 128, est: Estimator =
         result["targets_found_where_masked"] = float(np.isfinite(per_chip["shadow_length"])[has_shadow].mean()) \
             if has_shadow.any() else float("nan")
     return result
+
+
+def median_statistics(folder: str | os.PathLike, size: int = 128) -> dict[str, float]:
+    """The median of every statistic over a folder: one row of `sasmi evaluate`'s image-statistics table."""
+    return {name: s["median"] for name, s in chip_statistics(folder, size=size)["summary"].items()}

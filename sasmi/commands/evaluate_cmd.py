@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.eval.config import EvalConfig, SweepConfig
     from sasmi.eval.features import as_encoder
     from sasmi.eval.run import StderrLog, evaluate_folders
+    from sasmi.stats import median_statistics
 
     sets = parse_sets(args.sets, args.real)
     if (args.preset is None) != (args.generator is None):
@@ -93,10 +94,3 @@ def run(args: argparse.Namespace) -> int:
     log(f"wrote {path}")
     print(path)
     return 0
-
-
-def median_statistics(folder, size: int) -> dict[str, float]:
-    """`sasmi stats`'s medians of one folder: the image-statistics row of the report."""
-    from sasmi.stats import chip_statistics
-
-    return {name: s["median"] for name, s in chip_statistics(folder, size=size)["summary"].items()}
