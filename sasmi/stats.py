@@ -24,6 +24,7 @@ from skimage import filters, measure, morphology
 
 from sasmi.errors import SasmiError
 from sasmi.images import list_images
+from sasmi.masks import read_mask
 from sasmi.preprocess import check_size, load_image
 
 # name -> (label in tables, unit). Order is the table's order.
@@ -191,8 +192,7 @@ def mask_sizes(mask: np.ndarray) -> dict[str, float]:
 
 
 def _load_mask(path: Path, size: int) -> np.ndarray:
-    with Image.open(path) as im:
-        mask = np.asarray(im)
+    mask = read_mask(path)  # ids, whether palette or gray; one line naming the file when unreadable
     if mask.shape != (size, size):
         if mask.shape[0] != mask.shape[1]:
             raise SasmiError(f"{path}: a render mask must be square to compare at --size {size}")
