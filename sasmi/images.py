@@ -77,12 +77,6 @@ def write_gray(path: str | os.PathLike, image01: np.ndarray) -> None:
             raise ValueError(f"unsupported image suffix {path.suffix!r}")
 
 
-def write_mask(path: str | os.PathLike, mask: np.ndarray) -> None:
-    """Write an (H, W) uint8 label mask as PNG (values kept as they are, not scaled)."""
-    with atomic_path(path) as tmp:
-        Image.fromarray(mask.astype(np.uint8), mode="L").save(tmp, format="PNG")
-
-
 def _scale(a: np.ndarray, path: Path) -> np.ndarray:
     """Pixels of any integer or float type -> float32 in [0, 1]."""
     if a.dtype.byteorder not in ("=", "|"):

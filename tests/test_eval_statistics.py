@@ -4,7 +4,8 @@ import torch
 
 from sasmi.eval.config import EvalConfig
 from sasmi.eval.run import evaluate_folders
-from sasmi.images import write_gray, write_mask
+from sasmi.images import write_gray
+from sasmi.masks import write_class_mask
 from sasmi.labels import ChipLabel, TargetLabel
 
 
@@ -28,7 +29,7 @@ def render_set(folder, n, rng):
         mask[6:9, 4:7], mask[6:9, 7:13] = 1, 2
         image[mask == 1], image[mask == 2] = 0.95, 0.02
         write_gray(folder / "images" / f"{i:06d}.png", image)
-        write_mask(folder / "masks" / f"{i:06d}.png", mask)
+        write_class_mask(folder / "masks" / f"{i:06d}.png", mask)
         target = TargetLabel({"shape": "box"}, (5.0, 7.0), (4, 6, 7, 9), (7, 6, 13, 9))
         lines.append(ChipLabel(index=i, size=16, scene={}, targets=(target,)).dumps())
     (folder / "labels.jsonl").write_text("\n".join(lines) + "\n")

@@ -16,7 +16,8 @@ from sasmi.gan.autoencoder import AutoencoderConfig, load_encoder
 from sasmi import cli
 from sasmi.eval import features, phi_fid, preservation, sweeps
 from sasmi.errors import SasmiError
-from sasmi.images import list_images, read_gray, write_gray, write_mask
+from sasmi.images import list_images, read_gray, write_gray
+from sasmi.masks import write_class_mask
 from sasmi.labels import TargetLabel
 from sasmi.scene import Scene, Sonar, Target
 
@@ -52,7 +53,7 @@ def write_set(folder: Path, n: int, seed: int, labelled: bool = False, shift: in
         image = np.roll(image, shift, axis=1)
         write_gray(folder / ("images" if labelled else "") / f"{i:06d}.png", image)
         if labelled:
-            write_mask(folder / "masks" / f"{i:06d}.png", mask)
+            write_class_mask(folder / "masks" / f"{i:06d}.png", mask)
             lines.append(json.dumps({"index": i, "targets": [label], "size": SIZE}))
     if labelled:
         (folder / "labels.jsonl").write_text("\n".join(lines) + "\n")

@@ -21,7 +21,8 @@ from sasmi.gan.losses import reconstruction_loss
 from sasmi.gan.translate import translate, translate_folder
 from sasmi.errors import SasmiError
 from sasmi.labels import ChipLabel, TargetLabel
-from sasmi.images import read_gray, write_gray, write_mask
+from sasmi.images import read_gray, write_gray
+from sasmi.masks import write_class_mask
 
 CPU = torch.device("cpu")
 TINY_AE = AutoencoderRun(steps=4, size=32, batch=4, autoencoder=AutoencoderConfig((8, 8, 8, 16)),
@@ -70,7 +71,7 @@ def make_render_set(folder: Path, n: int = 6, size: int = 48, seed: int = 0) -> 
         mask = np.zeros((size, size), np.uint8)
         mask[target], mask[shadow] = 1, 2
         write_gray(folder / "images" / f"{i:06d}.png", image)
-        write_mask(folder / "masks" / f"{i:06d}.png", mask)
+        write_class_mask(folder / "masks" / f"{i:06d}.png", mask)
         target_label = TargetLabel(params={"shape": "cylinder"}, pixel_centre=(cx, cy),
                                    bbox=(cx - r, cy - r, cx + r, cy + r), shadow_bbox=(cx + r, cy - r, cx + 4 * r, cy + r))
         labels.append(ChipLabel(index=i, size=size, scene={}, targets=(target_label,), image=f"images/{i:06d}.png",

@@ -4,7 +4,8 @@ import pytest
 from PIL import Image
 
 from sasmi import cli
-from sasmi.images import list_images, write_gray, write_mask
+from sasmi.images import list_images, write_gray
+from sasmi.masks import write_class_mask
 
 
 @pytest.fixture
@@ -15,7 +16,7 @@ def renders(tmp_path):
         mask = np.zeros((16, 16), np.uint8)
         mask[4:8, 4:8], mask[4:8, 8:14] = 1, 2
         write_gray(folder / "images" / f"{i:06d}.png", rng.uniform(0, 1, (16, 16)))
-        write_mask(folder / "masks" / f"{i:06d}.png", mask)
+        write_class_mask(folder / "masks" / f"{i:06d}.png", mask)
     return folder
 
 
