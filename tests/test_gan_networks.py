@@ -36,11 +36,26 @@ def test_autoencoder_widths_must_give_1024():
 
 
 @pytest.mark.parametrize("size", [32, 64])
-def test_generator_keeps_shape_and_range(size):
-    g = Generator(GeneratorConfig(width=8, blocks=2))
+@pytest.mark.parametrize("residual", [False, True])
+def test_generator_keeps_shape_and_range(size, residual):
+    g = Generator(GeneratorConfig(width=8, blocks=2, residual=residual))
     x = torch.rand(2, 1, size, size) * 2 - 1
     y = g(x)
     assert y.shape == x.shape
+    assert y.min() >= -1 and y.max() <= 1
+
+
+def test_residual_generator_starts_as_the_render_and_can_leave_it():
+    g = Generator(GeneratorConfig(width=8, blocks=1, residual=True))
+    x = torch.rand(2, 1, 32, 32) * 1.8 - 0.9  # inside RENDER_REACH: no clamping
+    assert torch.allclose(g(x), x, atol=1e-5)
+    assert not torch.allclose(Generator(GeneratorConfig(width=8, blocks=1))(x), x, atol=0.1)
+    # the zero-initialised last conv still learns: one step moves the output toward a target
+    opt = torch.optim.Adam(g.parameters(), lr=1e-2)
+    ((g(x) - 0.5) ** 2).mean().backward()
+    opt.step()
+    assert ((g(x) - 0.5) ** 2).mean() < ((x - 0.5) ** 2).mean()
+    y = g(torch.ones(1, 1, 32, 32).tril() * 2 - 1)  # black and white render pixels, beyond RENDER_REACH
     assert y.min() >= -1 and y.max() <= 1
 
 

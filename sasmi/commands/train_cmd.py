@@ -91,6 +91,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--mask-weight", type=float,
                    help="weight of the mask contrast term (keeps shadows dark, highlights bright; needs masks/)")
     p.add_argument("--mask-keep", type=float, help="fraction of a render's shadow/highlight contrast to keep")
+    p.add_argument("--residual", action="store_true",
+                   help="the generator learns a correction to the render, starting from the render itself (default off)")
 
     p = add_kind("dcgan", "unconditional baseline: z → image, same objective")
     _add_common(p)
@@ -118,6 +120,12 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "net", None):
         overrides["critic"] = CRITIC_NETS[args.net]
         overrides |= {"generator": GENERATOR_NETS[args.net]} if kind is SASGAN else {"dcgan": DCGAN_NETS[args.net]}
+    if getattr(args, "residual", False):
+        from dataclasses import replace
+
+        from sasmi.gan.generator import GeneratorConfig
+
+        overrides["generator"] = replace(overrides.get("generator", GeneratorConfig()), residual=True)
     device = resolve_device(args.device)
     cfg = resolve_config(kind, args.out, overrides, args.resume)
 
