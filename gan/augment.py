@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from sasmi.gan.distributed import draw
+
 
 @dataclass(frozen=True)
 class AugmentConfig:
@@ -42,8 +44,8 @@ def augment(x: torch.Tensor, cfg: AugmentConfig, rng: torch.Generator) -> torch.
         return x
     b, _, h, w = x.shape
 
-    def uniform(*shape: int) -> torch.Tensor:
-        return torch.rand(shape, generator=rng).to(x.device)
+    def uniform(n: int, *shape: int) -> torch.Tensor:
+        return draw(rng, n, *shape).to(x.device)  # this process's slice of the global batch's draws
 
     if cfg.vflip:
         flip = (uniform(b, 1, 1, 1) < 0.5).to(x.dtype)

@@ -17,6 +17,7 @@ from typing import Any, Callable
 
 import torch
 
+from sasmi.gan import distributed
 from sasmi.gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
 from sasmi.errors import SasmiError
 
@@ -85,17 +86,22 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     phases = kind.build(cfg, {k: Path(v) for k, v in inputs.items()}, device)
 
     # ---- the run folder: a fresh one, or the state of last.pt
-    run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples)
+    world = distributed.world()
+    run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples, main=world.main)
     start = run.step
+    # bf16 on CUDA (autocast keeps losses, norms and the optimisers in float32); a CPU trains in float32
+    precision = torch.autocast(device.type, torch.bfloat16, enabled=cfg.amp and device.type == "cuda")
     try:
         for step in range(start + 1, cfg.steps + 1):
-            # ---- critic: critic_steps updates, each on fresh real and fake batches
-            logs: Logs = {}
-            for _ in range(phases.critic_steps):
-                logs = phases.critic_step()
-            # ---- generator: one update (the autoencoder's reconstruction step)
-            logs |= phases.generator_step()
-            # ---- log, samples, checkpoint
+            with precision:
+                # ---- critic: critic_steps updates, each on fresh real and fake batches
+                logs: Logs = {}
+                for _ in range(phases.critic_steps):
+                    logs = phases.critic_step()
+                # ---- generator: one update (the autoencoder's reconstruction step)
+                logs |= phases.generator_step()
+            # ---- log (the mean over processes), samples, checkpoint (the main process writes)
+            logs = distributed.mean_logs(logs)
             run.log(step, logs, score=logs[phases.score])
             if step % cfg.sample_every == 0 or step == cfg.steps:
                 run.write_samples()
@@ -103,6 +109,6 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
                 run.checkpoint()
     finally:
         run.close()
-    if phases.finish and run.step == cfg.steps:
+    if phases.finish and run.step == cfg.steps and world.main:
         phases.finish(run.out)
     return Trained(run.out, start, run.step)

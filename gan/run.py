@@ -70,6 +70,7 @@ class RunConfig:
     sample_every: int = 250  # steps between sample grids
     checkpoint_every: int = 250  # steps between last.pt writes; also best.pt's interval
     best_from: int = 0  # best.pt is only chosen at or after this step
+    amp: bool = True  # bf16 autocast on CUDA (a CPU always trains in float32)
 
     def validate(self) -> "RunConfig":
         """Self, or a SasmiError naming the flag and the allowed range."""
@@ -210,18 +211,25 @@ class RunFolder:
 
     `state` maps names to objects with state_dict/load_state_dict (models, optimisers,
     batch streams, noise); all of them go into each checkpoint. `inputs` maps an input's
-    flag name to (folder, fingerprint); a resume onto other data is refused.
+    flag name to (folder, fingerprint); a resume onto other data is refused. Across
+    processes only the `main` one writes; the others read a resumed state and keep count.
     """
 
     def __init__(self, kind: str, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, tuple[str, str]],
-                 resume: bool, state: dict[str, Any], samples: Callable[[], list[torch.Tensor]]):
+                 resume: bool, state: dict[str, Any], samples: Callable[[], list[torch.Tensor]], main: bool = True):
         self.kind, self.cfg, self.out, self.state, self.samples = kind, cfg, Path(out), state, samples
+        self.main = main
         self.inputs = {k: {"path": str(Path(p).resolve()), "fingerprint": f} for k, (p, f) in inputs.items()}
         self.step = self.saved_step = 0
         self.best = {"score": math.inf, "step": None}
         self.interval = [0.0, 0]  # score sum and count since the last multiple of checkpoint_every
         if resume:
             self._load()
+        self.writer = None
+        self.bar = tqdm(total=cfg.steps, initial=self.step, unit="step", desc=f"{kind} {self.out.name}",
+                        dynamic_ncols=True, mininterval=1.0, disable=None if main else True)
+        if not main:
+            return
         write_text(self.out / "config.json", json.dumps(
             {"kind": kind, "config": asdict(cfg), "inputs": self.inputs, "provenance": provenance()}, indent=2) + "\n")
         if not resume:
@@ -229,8 +237,6 @@ class RunFolder:
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(str(self.out / "tb"), purge_step=self.step if resume else None)
-        self.bar = tqdm(total=cfg.steps, initial=self.step, unit="step", desc=f"{kind} {self.out.name}",
-                        dynamic_ncols=True, mininterval=1.0, disable=None)
 
     def _load(self) -> None:
         saved = read_checkpoint(self.out / "checkpoints" / "last.pt", self.kind)
@@ -250,6 +256,8 @@ class RunFolder:
         self.best, self.interval = dict(saved.extra["best"]), list(saved.extra["interval"])
 
     def _save(self, which: str) -> None:
+        if not self.main:
+            return
         for name, obj in self.state.items():
             if isinstance(obj, torch.nn.Module) and not all(torch.isfinite(p).all() for p in obj.parameters()):
                 raise SasmiError(f"step {self.step}: {name} weights are not finite; "
@@ -272,12 +280,14 @@ class RunFolder:
         self.step = step
         self.interval = [self.interval[0] + score, self.interval[1] + 1]
         self.bar.update(1)
-        if step % self.cfg.log_every == 0:
+        if self.writer and step % self.cfg.log_every == 0:
             for k, v in scalars.items():
                 self.writer.add_scalar(k, v, step)
             self.bar.set_postfix({k.split("/")[-1]: f"{v:.3g}" for k, v in scalars.items() if k.startswith("loss/")})
 
     def write_samples(self) -> None:
+        if not self.main:
+            return
         grid = image_grid(self.samples())
         write_gray(self.out / "samples" / f"step_{self.step:06d}.png", grid[0].numpy())
         self.writer.add_image("samples", grid, self.step)
@@ -287,7 +297,8 @@ class RunFolder:
         if self.step % self.cfg.checkpoint_every == 0:
             score = self.interval[0] / max(self.interval[1], 1)
             self.interval = [0.0, 0]
-            self.writer.add_scalar("score", score, self.step)
+            if self.writer:
+                self.writer.add_scalar("score", score, self.step)
             if self.step >= self.cfg.best_from and score < self.best["score"]:
                 self.best = {"score": score, "step": self.step}
                 self._save("best")
@@ -295,4 +306,5 @@ class RunFolder:
 
     def close(self) -> None:
         self.bar.close()
-        self.writer.close()
+        if self.writer:
+            self.writer.close()

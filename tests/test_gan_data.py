@@ -36,6 +36,18 @@ def test_reads_formats_recursively_and_skips_unreadable(mixed_folder):
     assert images.images[images.paths.index(mixed_folder / "e.npy")].shape == (1, 32, 43)
 
 
+def test_worker_processes_read_the_same_set_in_the_same_order(mixed_folder, monkeypatch):
+    from sasmi.gan import data
+
+    with pytest.warns(UserWarning, match="broken.png"):
+        alone = ImageSet(mixed_folder, 32)
+    monkeypatch.setattr(data, "reading_workers", lambda n: 2)
+    with pytest.warns(UserWarning, match="broken.png"):  # a worker's failure is still named, and skipped
+        workers = ImageSet(mixed_folder, 32)
+    assert workers.paths == alone.paths
+    assert all(torch.equal(a, b) for a, b in zip(workers.images, alone.images))
+
+
 def test_batches_are_in_range_and_flip_along_track_only(mixed_folder):
     with pytest.warns(UserWarning):
         images = ImageSet(mixed_folder, 32)

@@ -8,6 +8,7 @@ import torch
 
 from sasmi.gan.autoencoder import Autoencoder, AutoencoderConfig
 from sasmi.gan.data import Batches, ImageSet
+from sasmi.gan.distributed import parallel
 from sasmi.gan.kinds.common import before_after, grad_norm, spread
 from sasmi.gan.loop import Kind, Logs, Phases
 from sasmi.gan.losses import reconstruction_loss
@@ -27,10 +28,11 @@ def build(cfg: AutoencoderRun, inputs: dict[str, Path], device: torch.device) ->
     fixed = real.center(spread(len(real), 8)).to(device)  # (n, 1, S, S) in [-1, 1]
     model = Autoencoder(cfg.autoencoder).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=cfg.betas)
+    train_model = parallel(model)  # gradients averaged across processes (gan/distributed.py)
 
     def generator_step() -> Logs:
         x = batches.next().to(device)  # (B, 1, S, S) in [-1, 1]
-        loss = reconstruction_loss(model(x), x)
+        loss = reconstruction_loss(train_model(x), x)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         norm = grad_norm(model)

@@ -8,6 +8,7 @@ import torch
 
 from sasmi.gan.augment import AugmentConfig, augment
 from sasmi.gan.critic import Critic, CriticConfig
+from sasmi.gan.distributed import draw
 from sasmi.gan.loop import Logs
 from sasmi.gan.losses import (critic_loss, generator_loss, gradient_penalty, logistic_critic_loss, logistic_generator_loss,
                         r1_penalty)
@@ -53,11 +54,12 @@ class Noise:
     def __init__(self, seed: int):
         self.rng = torch.Generator().manual_seed(seed)
 
-    def uniform(self, *shape: int) -> torch.Tensor:
-        return torch.rand(shape, generator=self.rng)
+    def uniform(self, n: int, *shape: int) -> torch.Tensor:
+        """(n, *shape) in [0, 1): this process's n of the global batch's draws (gan/distributed.py)."""
+        return draw(self.rng, n, *shape)
 
-    def normal(self, *shape: int) -> torch.Tensor:
-        return torch.randn(shape, generator=self.rng)
+    def normal(self, n: int, *shape: int) -> torch.Tensor:
+        return draw(self.rng, n, *shape, normal=True)
 
     def state_dict(self) -> dict:
         return {"rng": self.rng.get_state()}

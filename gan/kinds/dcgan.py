@@ -9,6 +9,7 @@ import torch
 from sasmi.gan.critic import Critic
 from sasmi.gan.data import Batches, ImageSet
 from sasmi.gan.dcgan import DCGANConfig, DCGANGenerator, sample
+from sasmi.gan.distributed import parallel, world
 from sasmi.gan.kinds.common import GanRun, Noise, adam, adversarial_loss, critic_phase, critic_view, grad_norm
 from sasmi.gan.loop import Kind, Logs, Phases
 from sasmi.gan.run import check_number
@@ -39,16 +40,17 @@ def build(cfg: DcganRun, inputs: dict[str, Path], device: torch.device) -> Phase
     opt_g = adam(generator.parameters(), cfg.lr, cfg)
     opt_c = adam(critic.parameters(), cfg.critic_lr or cfg.lr, cfg)
     view = critic_view(cfg, view_noise)  # real and fake alike
+    train_generator, train_critic = parallel(generator), parallel(critic)  # as in the SAS GAN (sasgan.py)
 
     def codes() -> torch.Tensor:
-        return noise.normal(cfg.batch, cfg.dcgan.z_dim).to(device)  # (B, z_dim) standard normal
+        return noise.normal(cfg.batch // world().size, cfg.dcgan.z_dim).to(device)  # (B, z_dim) standard normal
 
-    critic_step = critic_phase(cfg, critic, opt_c, lambda: real_batches.next().to(device),
+    critic_step = critic_phase(cfg, train_critic, opt_c, lambda: real_batches.next().to(device),
                                lambda: generator(codes()), view, noise, device)
 
     def generator_step() -> Logs:
         """Fool the critic."""
-        adversarial = adversarial_loss(cfg, critic(view(generator(codes()))))
+        adversarial = adversarial_loss(cfg, critic(view(train_generator(codes()))))
         opt_g.zero_grad(set_to_none=True)
         adversarial.backward()
         norm = grad_norm(generator)

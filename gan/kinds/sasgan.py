@@ -11,6 +11,7 @@ from torch.optim.swa_utils import AveragedModel
 from sasmi.gan.autoencoder import load_encoder
 from sasmi.gan.critic import Critic
 from sasmi.gan.data import Batches, ImageSet
+from sasmi.gan.distributed import parallel
 from sasmi.gan.generator import Generator, GeneratorConfig
 from sasmi.gan.kinds.common import (GanRun, Noise, adam, adversarial_loss, before_after, critic_phase, critic_view,
                               grad_norm, spread)
@@ -72,18 +73,21 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     opt_g = adam(generator.parameters(), cfg.lr, cfg)
     opt_c = adam(critic.parameters(), cfg.critic_lr or cfg.lr, cfg)
     view = critic_view(cfg, view_noise)  # real and fake alike
+    # what trains: across processes their gradients are averaged (gan/distributed.py); the
+    # critic that only passes gradients to the generator, and the no-grad fakes, need no wrapper
+    train_generator, train_critic = parallel(generator), parallel(critic)
 
     def render_batch() -> tuple[torch.Tensor, torch.Tensor | None]:
         x, masks = render_batches.next_with_masks()  # (B, 1, S, S) in [-1, 1]; uint8 labels or None
         return x.to(device), None if masks is None else masks.to(device)
 
-    critic_step = critic_phase(cfg, critic, opt_c, lambda: real_batches.next().to(device),
+    critic_step = critic_phase(cfg, train_critic, opt_c, lambda: real_batches.next().to(device),
                                lambda: generator(render_batch()[0]), view, noise, device)
 
     def generator_step() -> Logs:
         """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
         render, masks = render_batch()
-        fake = generator(render)  # (B, 1, S, S) in [-1, 1]
+        fake = train_generator(render)  # (B, 1, S, S) in [-1, 1]
         adversarial = adversarial_loss(cfg, critic(view(fake)))
         with torch.no_grad():
             phi_render = encoder(render)  # (B, 1024): a target, no gradient needed

@@ -2,7 +2,8 @@
 
 Flags left out take the defaults of the run configs in gan/kinds/ (docs/gan.md). A run's
 resolved settings travel inside each checkpoint (and RUN/config.json). With --resume only
---steps may change; --steps is the total to reach.
+--steps may change; --steps is the total to reach. Under `torchrun --nproc_per_node N -m sasmi
+train ...` the N processes share --batch and train one run (gan/distributed.py).
 """
 from __future__ import annotations
 
@@ -102,6 +103,7 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)  # before torch is imported
+    from sasmi.gan import distributed
     from sasmi.gan.critic import CRITIC_NETS
     from sasmi.gan.dcgan import DCGAN_NETS
     from sasmi.gan.generator import GENERATOR_NETS
@@ -126,10 +128,16 @@ def run(args: argparse.Namespace) -> int:
         from sasmi.gan.generator import GeneratorConfig
 
         overrides["generator"] = replace(overrides.get("generator", GeneratorConfig()), residual=True)
-    device = resolve_device(args.device)
-    cfg = resolve_config(kind, args.out, overrides, args.resume)
-
-    done = train(kind, cfg, args.out, inputs, device, args.resume)
+    device = distributed.start(resolve_device(args.device))
+    main = distributed.world().main
+    try:
+        cfg = resolve_config(kind, args.out, overrides, args.resume)
+        distributed.barrier()  # every process has looked at --out before the main one writes into it
+        done = train(kind, cfg, args.out, inputs, device, args.resume)
+    finally:
+        distributed.stop()
+    if not main:
+        return 0
     if done.step == done.start and args.resume:
         print(f"sasmi train {args.kind}: {done.out} is already at step {done.step} (--steps {cfg.steps}); "
               f"nothing trained; raise --steps to train on")
