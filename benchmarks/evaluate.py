@@ -5,8 +5,8 @@ runs in a fresh process, so each peak RSS is its own.
 
     .venv/bin/python benchmarks/evaluate.py [--sizes 6000 20000] [--bootstrap 2] [--image-size 32]
 
-Memory does not depend on --bootstrap (only time does). Images are held whole, N × S² float32
-per set: at --image-size 128 add 2 × N × 64 KiB (1.5 GiB for N = 6000) to the figures printed.
+Memory does not depend on --bootstrap (only time does). Images are held as the evaluation holds
+them, N × S² uint8 per set (read a block at a time: sasmi.eval.features.load_set).
 Targets (GitHub issue 15): < 2 GB at 6000 + 6000, < 4 GB at 20000 + 20000.
 """
 from __future__ import annotations
@@ -30,9 +30,9 @@ def one(n: int, bootstrap: int, image_size: int, dim: int) -> None:
     from sasmi.eval.run import evaluate
 
     rng = np.random.default_rng(0)
-    real = FeatureSet("real", Path("real"), rng.random((n, image_size, image_size), dtype=np.float32),
+    real = FeatureSet("real", Path("real"), rng.integers(0, 256, (n, image_size, image_size), np.uint8),
                       rng.standard_normal((n, dim)))
-    fake = FeatureSet("fake", Path("fake"), rng.random((n, image_size, image_size), dtype=np.float32),
+    fake = FeatureSet("fake", Path("fake"), rng.integers(0, 256, (n, image_size, image_size), np.uint8),
                       rng.standard_normal((n, dim)) + 0.02)
     inputs_mb = (real.phi.nbytes + fake.phi.nbytes + real.images.nbytes + fake.images.nbytes) / 2**20
     start = time.perf_counter()

@@ -89,3 +89,18 @@ def test_unreadable_cache_entry_is_recomputed(folder, tmp_path):
     again = load_set("real", folder, encoder, cache_dir=tmp_path / "cache").phi
     assert encoder.encoded == 12
     np.testing.assert_array_equal(again, first)
+
+
+def test_a_set_read_in_blocks_keeps_float_phi_and_8_bit_pixels(folder, monkeypatch):
+    from sasmi.eval import features
+
+    paths = features.image_paths(folder)
+    whole = features.load_images(paths, CountingEncoder.image_size)  # (6, 16, 16) float32 in [0, 1]
+    monkeypatch.setattr(features, "READ_BLOCK", 4)  # 6 images: blocks of 4 and 2
+    encoder = CountingEncoder()
+    s = load_set("real", folder, encoder)
+    assert s.images.dtype == np.uint8 and np.array_equal(s.images, np.round(whole * 255).astype(np.uint8))
+    # φ from the float images, not the 8-bit copy (the .npy chip has values between 8-bit levels)
+    assert np.allclose(s.phi, features.phi_features(encoder, whole), atol=1e-6)
+    assert not np.allclose(s.phi, features.phi_features(encoder, s.images / np.float32(255)), atol=1e-6)
+    assert np.allclose(s.image(5), whole[5], atol=0.5 / 255 + 1e-7)

@@ -103,8 +103,8 @@ def copy_statistics(nn_generated: np.ndarray, nn_real: np.ndarray, percentile: f
 
 def copying_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig, out_dir: Path) -> dict:
     """Nearest real neighbours of generated images in pixel ℓ2 (rms per pixel) and in φ; grids and histograms."""
-    real_pixels = real.images.reshape(len(real.images), -1)  # float32: converted block by block
-    pixel_scale = math.sqrt(real_pixels.shape[1])  # ℓ2 / √pixels = rms gray-level difference
+    real_pixels = real.images.reshape(len(real.images), -1)  # uint8: converted block by block
+    pixel_scale = 255.0 * math.sqrt(real_pixels.shape[1])  # ℓ2 / (255 √pixels) = rms difference in [0, 1]
     real_nn = {"pixel": nearest(real_pixels, real_pixels, 1, exclude_self=True)[1][:, 0] / pixel_scale,
                "phi": nearest(real.phi, real.phi, 1, exclude_self=True)[1][:, 0]}
     metrics, generated_nn = {}, {}

@@ -114,9 +114,9 @@ def neighbour_grid(s: FeatureSet, real: FeatureSet, shown: np.ndarray, pixel: tu
     """Rows: a generated image, its k nearest real images in pixel ℓ2, then in φ."""
     rows = []
     for i in shown:
-        cells = [(s.images[i], s.name)]
-        cells += [(real.images[j], f"px {d:.3f}") for j, d in zip(pixel[0][i], pixel[1][i])]
-        cells += [(real.images[j], f"φ {d:.3g}") for j, d in zip(phi[0][i], phi[1][i])]
+        cells = [(s.image(i), s.name)]
+        cells += [(real.image(j), f"px {d:.3f}") for j, d in zip(pixel[0][i], pixel[1][i])]
+        cells += [(real.image(j), f"φ {d:.3g}") for j, d in zip(phi[0][i], phi[1][i])]
         rows.append(cells)
     k = pixel[0].shape[1]
     mosaic_figure(rows, path, gaps_before=(1, 1 + k))
@@ -272,7 +272,7 @@ def tsne_figure(groups: Sequence[tuple[FeatureSet, np.ndarray, np.ndarray]], xy:
         pts = xy[start:start + len(idx)]
         ax.scatter(pts[:, 0], pts[:, 1], s=8, alpha=0.6, color=f"C{colour}", label=f"{s.name} ({len(idx)})")
         for j in thumbs:
-            thumb = OffsetImage(s.images[idx[j]], cmap="gray", norm=Normalize(0, 1), zoom=32 / s.images.shape[-1])
+            thumb = OffsetImage(s.image(idx[j]), cmap="gray", norm=Normalize(0, 1), zoom=32 / s.images.shape[-1])
             ax.add_artist(AnnotationBbox(thumb, pts[j], frameon=True, pad=0.1,
                                          bboxprops={"edgecolor": f"C{colour}", "linewidth": 1.5}))
         start += len(idx)
