@@ -1,9 +1,11 @@
 """Render speed and memory: ms/image at 256², 32 emitters, 16 spp (labels and PNG writing
 included), median over >= 20 images after warm-up, wall and CPU time (all threads); POV-Ray's
-time for the first of those scenes, as `sasmi crosscheck` traces it, beside it; and peak RSS
-of `sasmi render` for --count 10 vs --count 1000 (memory must stay flat in the count).
+time for the first of those scenes, as `sasmi crosscheck` traces it, beside it; the throughput
+of `sasmi render` itself in ms/chip with --workers 1 and 2 (the chips of a long run over the
+chips of a short one, so start-up and compilation cancel); and peak RSS of `sasmi render` for
+--count 10 vs --count 1000 (memory must stay flat in the count).
 
-    .venv/bin/python benchmarks/render.py [--images 24] [--rss-counts 10 1000] [--rss-size 256] [--no-povray]
+    .venv/bin/python benchmarks/render.py [--images 24] [--workers 1 2] [--rss-counts 10 1000] [--no-povray]
 """
 from __future__ import annotations
 
@@ -75,12 +77,29 @@ def peak_rss_mb(count: int, size: int) -> tuple[float, float]:
     return kb / 1024, seconds
 
 
+def render_seconds(count: int, size: int, workers: int) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "sasmi", "render", str(PRESET), "--count", str(count), "--out",
+                        str(Path(tmp) / "set"), "--size", str(size), "--workers", str(workers)],
+                       capture_output=True, text=True, check=True, cwd=REPO)
+        return time.perf_counter() - start
+
+
+def throughput_ms(workers: int, size: int, short: int, long: int) -> float:
+    """ms per chip of `sasmi render --workers N`: (time of `long` chips - time of `short`) / (long - short)."""
+    return (render_seconds(long, size, workers) - render_seconds(short, size, workers)) / (long - short) * 1000
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--images", type=int, default=24)
     ap.add_argument("--warmup", type=int, default=3)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--workers", type=int, nargs="*", default=[1, 2], help="render processes to time sasmi render with")
+    ap.add_argument("--chips", type=int, nargs=2, default=[16, 96], metavar=("SHORT", "LONG"),
+                    help="the two run lengths whose difference is timed (default 16 96)")
     ap.add_argument("--rss-counts", type=int, nargs="*", default=[10, 1000])
     ap.add_argument("--rss-size", type=int, default=256)
     ap.add_argument("--no-povray", action="store_true", help="skip the POV-Ray timing (no povray installed)")
@@ -100,6 +119,10 @@ def main() -> None:
         print(f"POV-Ray on the first of those scenes ({args.size}x{args.size}, 32 emitters, 3x3 jittered + centre ray, "
               f"radiance only): {wall:.0f} ms wall, CPU {pov_cpu:.0f} ms; POV-Ray / Mitsuba: "
               f"{wall / statistics.median(times):.1f}x wall, {pov_cpu / statistics.median(cpu):.1f}x CPU")
+    for workers in args.workers:
+        ms = throughput_ms(workers, args.size, *args.chips)
+        print(f"sasmi render --size {args.size} --workers {workers}: {ms:.0f} ms/chip "
+              f"(chips {args.chips[0]}..{args.chips[1]}, start-up excluded)")
     for count in args.rss_counts:
         rss, seconds = peak_rss_mb(count, args.rss_size)
         print(f"sasmi render --count {count} --size {args.rss_size}: peak RSS {rss:.0f} MB, "
