@@ -43,8 +43,8 @@ def main() -> None:
     fig, axes = plt.subplots(3, args.count, figsize=(1.3 * args.count, 4.1))
     for col, (i, j) in enumerate(zip(picks, nearest)):
         render = read_gray(renders[names[i]])
-        for row, (image, title) in enumerate(((render, "render"), (translated.images[i], "translation"),
-                                              (real.images[j], "nearest real"))):
+        for row, (image, title) in enumerate(((render, "render"), (translated.image(i), "translation"),
+                                              (real.image(j), "nearest real"))):
             ax = axes[row, col]
             ax.imshow(image, cmap="gray", vmin=0, vmax=1)
             ax.set_xticks([])
