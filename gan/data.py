@@ -3,10 +3,10 @@
 A render set's masks (masks/NAME.png: 0 seafloor, 1 target, 2 shadow) come along when
 asked for, cropped and flipped with their images. Every usable image is read once (by a
 DataLoader's worker processes when the set is large), resized so its shorter side equals
-`size`, and kept in memory (N × size² float32: 1000 renders at 256² are 260 MB). Batches are cut from it by
-a `Batches` stream whose only randomness is its own torch.Generator, so the data order,
-crops and flips are part of a checkpoint and a resumed run sees the same batches as an
-uninterrupted one.
+`size`, and kept in memory (N × size² float32: 1000 renders at 256² are 260 MB). Batches
+are cut from it by a `Batches` stream whose only randomness is its own torch.Generator, so
+the data order, crops and flips are part of a checkpoint and a resumed run sees the same
+batches as an uninterrupted one.
 """
 from __future__ import annotations
 
