@@ -83,8 +83,7 @@ def parallel(module: torch.nn.Module) -> torch.nn.Module:
 
 def draw(rng: torch.Generator, n: int, *shape: int, normal: bool = False) -> torch.Tensor:
     """n samples of shape `shape` for this process: the global n·size are drawn, this slice kept."""
-    full = (torch.randn if normal else torch.rand)((n * _world.size, *shape), generator=rng)
-    return full[_world.rank * n:(_world.rank + 1) * n]
+    return _world.local((torch.randn if normal else torch.rand)((n * _world.size, *shape), generator=rng))
 
 
 def mean_logs(logs: dict[str, float]) -> dict[str, float]:
