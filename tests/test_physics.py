@@ -220,3 +220,13 @@ def test_too_narrow_aperture_fails_before_anything_is_written(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "sonar.aperture_angle: 2 deg" in err and "allowed: >=" in err
     assert not out.exists()
+
+
+def test_speckle_table_lookup_is_np_interp():
+    """The speckle's gamma quantiles are read by index arithmetic on their even grid: the same as np.interp."""
+    from sasmi.render.post import _gamma_quantiles, _interp_uniform
+
+    z, q = _gamma_quantiles(6.5)
+    x = np.random.default_rng(3).normal(0.0, 3.0, (64, 64))
+    x[0, :4] = [-20.0, 20.0, z[0], z[-1]]  # beyond the table and on its ends
+    assert np.allclose(_interp_uniform(x, z, q), np.interp(x, z, q), rtol=0, atol=1e-12)

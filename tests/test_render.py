@@ -131,17 +131,50 @@ def test_wrong_llvm_library_is_one_line(tmp_path):
 def test_next_scene_reuses_the_compiled_kernels():
     import drjit as dr
 
-    preset = load_preset(REPO / "scenes" / "muscle_paper.toml")
+    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    first, second = preset.sample(1, 0), preset.sample(1, 1)
+    assert first.targets[0].shape != second.targets[0].shape and first.sonar.cone_angle != second.sonar.cone_angle
     renderer = Renderer(size=32, spp=4)
-    renderer.render(preset.sample(1, 0))
+    renderer.render(first)
+    loaded = renderer.mitsuba_scene
     dr.kernel_history()  # drop what the first scene compiled
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        renderer.render(preset.sample(1, 1))  # new heightfield, pose, emitters: same structure
+        renderer.render(second)  # new heightfield, kind of target, cone angle: an update of the same scene
         kernels = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert renderer.mitsuba_scene is loaded
     assert kernels and all(k["cache_hit"] for k in kernels)
+
+
+def test_masks_from_the_traced_pixels_equal_masks_from_every_pixel(renderer64):
+    """A render traces camera rays only where a mask can need them (`mask_pixels`); every pixel gives the same."""
+    from sasmi.render.geometry import build_geometry
+
+    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    for index in range(4):
+        scene = preset.sample(2, index)
+        out = renderer64.render(scene)
+        visible, owner = renderer64.visibility(build_geometry(scene, 64), renderer64.camera_hits())
+        assert (visible >= 0).any() and (owner >= 0).any()
+        assert np.array_equal(out.instances, visible + 1) and np.array_equal(out.shadows, owner + 1)
+
+
+def test_a_scene_updated_in_place_renders_as_a_fresh_one():
+    """A cylinder chip after a torus chip: the update must bring the new triangles, cone and pose along."""
+    preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
+    before, scene = preset.sample(0, 0), preset.sample(0, 1)
+    assert before.targets[0].shape != scene.targets[0].shape
+    # a beam narrow enough to darken the chip's ends, after a wide one that lights it all
+    before = dataclasses.replace(before, sonar=dataclasses.replace(before.sonar, cone_angle=45.0))
+    scene = dataclasses.replace(scene, sonar=dataclasses.replace(scene.sonar, cone_angle=20.0))
+    renderer = Renderer(size=32, spp=4)
+    renderer.render(before)
+    updated = renderer.render(scene)
+    fresh = Renderer(size=32, spp=4).render(scene)
+    assert np.array_equal(updated.mask, fresh.mask) and np.array_equal(updated.shadows, fresh.shadows)
+    assert np.abs(updated.image - fresh.image).max() <= 1 / 255
 
 
 def test_two_workers_match_one(tmp_path, render_set):

@@ -56,7 +56,6 @@ class Geometry:
     def structure(self) -> tuple:
         """What must stay equal for a compiled renderer to be updated in place."""
         return (self.size, len(self.floor.vertices), self.floor.cos_power, len(self.emitter_positions),
-                self.cone_angle, self.beam_width,
                 tuple((len(t.vertices), len(t.faces)) for t in self.targets))
 
 
@@ -216,9 +215,10 @@ def exposure(positions: np.ndarray, cos_power: int = 1, beam: tuple | None = Non
 def flat_floor_irradiance(positions: np.ndarray, size: int, cos_power: int = 1, beam: tuple | None = None
                           ) -> np.ndarray:
     """(size, size) sum of [profile x] cos(theta)^cos_power / d^2 over the emitters, flat floor at pixel centres."""
-    centres = (np.arange(size) + 0.5) / size * 2 - 1
+    # float32 per emitter (a relative error of 1e-7, far below a gray level) halves the time of 32 emitters
+    centres = ((np.arange(size) + 0.5) / size * 2 - 1).astype(np.float32)
     total = np.zeros((size, size))
-    for k, (px, py, pz) in enumerate(positions):
+    for k, (px, py, pz) in enumerate(positions.astype(np.float32)):
         d2 = ((px - centres) ** 2)[None, :] + ((py - centres) ** 2 + pz**2)[:, None]  # (rows = y, cols = x)
         cos_theta = pz / np.sqrt(d2)
         part = (cos_theta if cos_power == 1 else cos_theta**cos_power) / d2

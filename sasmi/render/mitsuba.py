@@ -9,7 +9,9 @@ applies the sonar's gain, speckle and noise.
 
 Consecutive scenes with the same structure (pixel count, emitter count, target vertex
 counts) update the loaded Mitsuba scene through `mi.traverse`, so the JIT compiles the
-render kernel once per process and later images cost only the render itself.
+render kernel once per process and later images cost only the render itself. Target
+meshes are padded to a common size (`padded`) so that a chip of another kind, like a
+spot of another cone angle, is an update too, not a new scene.
 """
 from __future__ import annotations
 
@@ -25,12 +27,26 @@ from sasmi.masks import instance_ids
 from sasmi.render.annotate import chip_label, class_mask, clutter_in_slant, labels_dict
 from sasmi.render.bsdf import bsdf_dict
 from sasmi.render.bsdf import register as register_bsdf
-from sasmi.render.geometry import Geometry, build_geometry
+from sasmi.render.geometry import Geometry, TriangleMesh, build_geometry
 from sasmi.render.llvm import aligned, import_mitsuba
 from sasmi.render.post import post_maps, postprocess
 from sasmi.render.slant import labels_to_slant, slant_map, to_slant
-from sasmi.render.visibility import CAMERA_HEIGHT, Occluders, camera_hits, mi_mesh, shape_ids, visibility
+from sasmi.render.visibility import (CAMERA_HEIGHT, Occluders, camera_hits, mask_pixels, mi_mesh, shape_ids,
+                                    visibility)
 from sasmi.scene import Scene
+
+
+TARGET_BUCKET = (1024, 2048)  # vertices, faces: every built-in kind fits (a sphere has 642, 1280)
+
+
+def padded(mesh: TriangleMesh) -> TriangleMesh:
+    """`mesh` grown to TARGET_BUCKET (or the next power of two) with copies of its first vertex and
+    empty triangles, which no ray hits and which leave its bounds as they were."""
+    vertices, faces = len(mesh.vertices), len(mesh.faces)
+    grown_vertices = max(TARGET_BUCKET[0], 1 << (vertices - 1).bit_length())
+    grown_faces = max(TARGET_BUCKET[1], 1 << (faces - 1).bit_length())
+    return replace(mesh, vertices=np.concatenate([mesh.vertices, np.repeat(mesh.vertices[:1], grown_vertices - vertices, 0)]),
+                   faces=np.concatenate([mesh.faces, np.zeros((grown_faces - faces, 3), mesh.faces.dtype)]))
 
 
 @dataclass(frozen=True)
@@ -116,15 +132,19 @@ class Renderer:
         p["floor.bsdf.reflectance.value"] = g.floor.albedo
         for k, t in enumerate(g.targets):
             p[f"target_{k}.vertex_positions"] = aligned(t.vertices)
+            p[f"target_{k}.faces"] = aligned(t.faces, np.uint32)  # another kind of target: other triangles
             p[f"target_{k}.bsdf.reflectance.value"] = t.albedo
         self._occluders.update(g)
         for k, (pos, aim) in enumerate(zip(g.emitter_positions, g.aims)):
             p[f"emitter_{k}.to_world"] = spot_to_world(self.mi, pos, aim)
+            p[f"emitter_{k}.cutoff_angle"] = g.cone_angle
+            p[f"emitter_{k}.beam_width"] = g.beam_width
         p["emitter_0.intensity.value"] = g.emitter_intensity
         p.update()
 
     def prepare(self, g: Geometry) -> None:
         """Load or update the Mitsuba scene so that it shows `g`."""
+        g = replace(g, targets=tuple(padded(t) for t in g.targets))
         if g.structure != self._structure:
             self._load(g)
         else:
@@ -150,14 +170,15 @@ class Renderer:
     def radiance(self, seed: int) -> np.ndarray:
         return self.collect(self.launch(seed))
 
-    def camera_hits(self) -> tuple[np.ndarray, np.ndarray]:
-        """(H*W,) shape registry ids and surface heights (chip units) of the prepared scene at the pixel centres."""
-        return camera_hits(self.mi, self.dr, self._scene, self.size)
+    def camera_hits(self, pixels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(H*W,) shape registry ids and surface heights (chip units) of the prepared scene at the pixel
+        centres (at `pixels` only, when given: see `visibility.camera_hits`)."""
+        return camera_hits(self.mi, self.dr, self._scene, self.size, pixels)
 
     def visibility(self, g: Geometry, hits: tuple[np.ndarray, np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) each: visible target index and shadowing target index (-1 none) of the prepared `g`."""
-        ids, heights = hits if hits is not None else self.camera_hits()
+        ids, heights = hits if hits is not None else self.camera_hits(mask_pixels(g))
         return visibility(ids, heights, self._target_ids, self._occluders, g)
 
     def render(self, scene: Scene) -> Rendered:
@@ -166,7 +187,7 @@ class Renderer:
         launched = self.launch(scene.seed)
         maps = post_maps(scene, g)  # numpy work while the render runs
         radiance = self.collect(launched)
-        hits = self.camera_hits()
+        hits = self.camera_hits(None if scene.sonar.slant_range else mask_pixels(g))  # slant range: every height
         visible, owner = self.visibility(g, hits)
         if scene.sonar.slant_range:
             return self._render_slant(scene, g, radiance, maps, visible, owner, hits[1].reshape(self.size, self.size))

@@ -87,6 +87,7 @@ class Occluders:
     def update(self, g: Geometry) -> None:
         for k, t in enumerate(g.targets):
             self.params[f"target_{k}.vertex_positions"] = aligned(t.vertices)
+            self.params[f"target_{k}.faces"] = aligned(t.faces, np.uint32)
         if g.targets:
             self.params.update()
 
@@ -109,28 +110,50 @@ def pixel_centres(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.meshgrid(centres, centres)
 
 
-def camera_hits(mi, dr, scene, n: int) -> tuple[np.ndarray, np.ndarray]:
+def mask_pixels(g: Geometry) -> np.ndarray:
+    """(H*W,) bool: the pixels whose camera hit the masks use, about a tenth of a chip: those under a
+    target's footprint (the camera looks straight down, so no other pixel can see a target) and the
+    shadow candidates (the only floor points the shadow rays start from)."""
+    xs, ys = pixel_centres(g.size)
+    points = np.stack([xs.ravel(), ys.ravel()], 1)
+    needed = shadow_candidates(g, points)
+    for t in g.targets:
+        low, high = t.vertices[:, :2].min(0), t.vertices[:, :2].max(0)
+        needed |= ((points >= low) & (points <= high)).all(1)
+    return needed
+
+
+def camera_hits(mi, dr, scene, n: int, pixels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(n*n,) int64 Mitsuba shape registry id (0 for a miss) and float64 height (chip units) of the surface
-    seen through each pixel centre, straight down, row-major.
+    seen through each pixel centre, straight down, row-major; only at `pixels` ((n*n,) bool) when given,
+    id 0 and height NaN elsewhere.
 
     One preliminary intersection gives both: the masks need which shape and where, not the full
     SurfaceInteraction, and evaluating the two outputs together traces the rays once (reading
     them one after the other would launch the ray-tracing kernel once per output).
     """
-    xs, ys = pixel_centres(n)
-    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(n * n, CAMERA_HEIGHT)))
+    xs, ys = (c.ravel() for c in pixel_centres(n))
+    if pixels is not None:
+        if not pixels.any():  # a chip without targets: nothing to trace (Dr.Jit aborts on empty rays)
+            return np.zeros(n * n, dtype=np.int64), np.full(n * n, np.nan)
+        xs, ys = xs[pixels], ys[pixels]
+    origin = mi.Point3f(aligned(xs), aligned(ys), aligned(np.full(len(xs), CAMERA_HEIGHT)))
     pi = scene.ray_intersect_preliminary(mi.Ray3f(origin, mi.Vector3f(0, 0, -1)))
     ids, heights = dr.reinterpret_array(mi.UInt32, pi.shape), CAMERA_HEIGHT - pi.t
     dr.eval(ids, heights)
-    return np.asarray(ids, dtype=np.int64), np.asarray(heights, dtype=np.float64)
+    if pixels is None:
+        return np.asarray(ids, dtype=np.int64), np.asarray(heights, dtype=np.float64)
+    all_ids, all_heights = np.zeros(n * n, dtype=np.int64), np.full(n * n, np.nan)
+    all_ids[pixels], all_heights[pixels] = np.asarray(ids), np.asarray(heights)
+    return all_ids, all_heights
 
 
 def visibility(ids: np.ndarray, heights: np.ndarray, target_ids: np.ndarray, occluders: Occluders, g: Geometry
                ) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) int64 each: index of the visible target (-1 none) and of the target shadowing the pixel (-1 none).
 
-    `ids` and `heights` (H*W,) are `camera_hits` of the rendered Mitsuba scene of `g`, `target_ids`
-    its targets' registry ids.
+    `ids` and `heights` (H*W,) are `camera_hits` of the rendered Mitsuba scene of `g` (at `mask_pixels(g)`
+    or more), `target_ids` its targets' registry ids.
     """
     n = g.size
     visible = index_of(ids, target_ids)
@@ -140,7 +163,8 @@ def visibility(ids: np.ndarray, heights: np.ndarray, target_ids: np.ndarray, occ
     probes = shadow_probes(len(g.emitter_positions), APERTURE_PROBES if g.broadside else SHADOW_PROBES)
     emitters = g.emitter_positions[probes].astype(np.float32)  # (K, 3)
     owner = np.full(n * n, -1, dtype=np.int64)
-    candidates = np.nonzero(shadow_candidates(g, lifted) & (visible < 0))[0]
+    traced = np.nonzero(np.isfinite(heights) & (visible < 0))[0]
+    candidates = traced[shadow_candidates(g, lifted[traced])]
     if candidates.size:
         points = lifted[candidates]
         # with broadside beams a probe counts as much as it lights the point; else every probe counts 1
