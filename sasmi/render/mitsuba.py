@@ -43,10 +43,10 @@ def padded(mesh: TriangleMesh) -> TriangleMesh:
     """`mesh` grown to TARGET_BUCKET (or the next power of two) with copies of its first vertex and
     empty triangles, which no ray hits and which leave its bounds as they were."""
     vertices, faces = len(mesh.vertices), len(mesh.faces)
-    grown_vertices = max(TARGET_BUCKET[0], 1 << (vertices - 1).bit_length())
-    grown_faces = max(TARGET_BUCKET[1], 1 << (faces - 1).bit_length())
-    return replace(mesh, vertices=np.concatenate([mesh.vertices, np.repeat(mesh.vertices[:1], grown_vertices - vertices, 0)]),
-                   faces=np.concatenate([mesh.faces, np.zeros((grown_faces - faces, 3), mesh.faces.dtype)]))
+    more_vertices = max(TARGET_BUCKET[0], 1 << (vertices - 1).bit_length()) - vertices
+    more_faces = max(TARGET_BUCKET[1], 1 << (faces - 1).bit_length()) - faces
+    return replace(mesh, vertices=np.concatenate([mesh.vertices, np.repeat(mesh.vertices[:1], more_vertices, 0)]),
+                   faces=np.concatenate([mesh.faces, np.zeros((more_faces, 3), mesh.faces.dtype)]))
 
 
 @dataclass(frozen=True)
