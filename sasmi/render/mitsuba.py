@@ -186,8 +186,9 @@ class Renderer:
         self.prepare(g)
         launched = self.launch(scene.seed)
         maps = post_maps(scene, g)  # numpy work while the render runs
+        pixels = None if scene.sonar.slant_range else mask_pixels(g)  # slant range needs every height
         radiance = self.collect(launched)
-        hits = self.camera_hits(None if scene.sonar.slant_range else mask_pixels(g))  # slant range: every height
+        hits = self.camera_hits(pixels)
         visible, owner = self.visibility(g, hits)
         if scene.sonar.slant_range:
             return self._render_slant(scene, g, radiance, maps, visible, owner, hits[1].reshape(self.size, self.size))
