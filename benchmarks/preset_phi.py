@@ -40,18 +40,18 @@ def parameter_columns(labels) -> dict[str, np.ndarray]:
     return {name: np.asarray(values) for name, values in columns.items() if len(values) == len(labels)}
 
 
-def breakdown(values: np.ndarray, on_manifold: np.ndarray) -> tuple[float, str]:
+def breakdown(values: np.ndarray, on_real: np.ndarray) -> tuple[float, str]:
     """(spread of the on-manifold share across groups, one table cell) for one parameter."""
     if values.dtype.kind not in "fi":
         groups = [(str(v), values == v) for v in np.unique(values)]
     else:
         finite = np.isfinite(values)
-        if np.ptp(values[finite]) == 0:
+        if not finite.any() or np.ptp(values[finite]) == 0:
             return 0.0, ""
         edges = np.quantile(values[finite], [0, 0.25, 0.5, 0.75, 1])
         quartile = np.clip(np.searchsorted(edges[1:-1], values, side="right"), 0, 3)
         groups = [(f"{edges[q]:.3g}-{edges[q + 1]:.3g}", finite & (quartile == q)) for q in range(4)]
-    shares = [(name, on_manifold[member].mean(), member.sum()) for name, member in groups if member.any()]
+    shares = [(name, on_real[member].mean(), member.sum()) for name, member in groups if member.any()]
     spread = max(s for _, s, _ in shares) - min(s for _, s, _ in shares)
     return spread, "  ".join(f"{name}: {share:.2f} ({n})" for name, share, n in shares)
 
@@ -65,7 +65,7 @@ def main() -> int:
     args = ap.parse_args()
 
     from sasmi.eval.features import as_encoder, load_set
-    from sasmi.eval.neighbours import kth_neighbour_radius, within_any_ball
+    from sasmi.eval.metrics import on_manifold
     from sasmi.gan.autoencoder import load_encoder
     from sasmi.labels import read_labels
 
@@ -75,10 +75,10 @@ def main() -> int:
     labels = sorted(read_labels(args.renders), key=lambda label: label.index)
     if len(labels) != len(renders.phi):
         raise SystemExit(f"{args.renders}: {len(labels)} labels for {len(renders.phi)} images")
-    on_manifold = within_any_ball(renders.phi, real.phi, kth_neighbour_radius(real.phi, args.k))
-    print(f"{len(labels)} renders, {len(real.phi)} real chips: {on_manifold.mean():.2f} of the renders on the "
+    on_real = on_manifold(renders.phi, real.phi, args.k)  # as sasmi evaluate's precision counts them
+    print(f"{len(labels)} renders, {len(real.phi)} real chips: {on_real.mean():.2f} of the renders on the "
           f"real manifold (precision, k={args.k}); share per quartile (count), parameters that matter most first")
-    rows = [(name, *breakdown(values, on_manifold)) for name, values in parameter_columns(labels).items()]
+    rows = [(name, *breakdown(values, on_real)) for name, values in parameter_columns(labels).items()]
     for name, spread, cell in sorted(rows, key=lambda row: -row[1]):
         if cell:
             print(f"{name:28s} spread {spread:.2f}   {cell}")

@@ -168,9 +168,15 @@ def precision_recall(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3)
     real = _as_features(feats_real, k + 1, "precision_recall (real)")
     fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
     # in blocks of rows (sasmi.eval.neighbours): memory stays bounded at any set size
-    precision = np.mean(within_any_ball(fake, real, kth_neighbour_radius(real, k)))
-    recall = np.mean(within_any_ball(real, fake, kth_neighbour_radius(fake, k)))
+    precision = np.mean(on_manifold(fake, real, k))
+    recall = np.mean(on_manifold(real, fake, k))
     return float(precision), float(recall)
+
+
+def on_manifold(points: np.ndarray, reference: np.ndarray, k: int = 3) -> np.ndarray:
+    """(N,) bool: each point inside some reference sample's ball (radius: its distance to its k-th
+    nearest reference neighbour); the mean over generated points against real ones is precision."""
+    return within_any_ball(points, reference, kth_neighbour_radius(reference, k))
 
 
 def rms(feats: np.ndarray) -> float:
