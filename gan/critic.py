@@ -1,7 +1,8 @@
 """The critic shared by the SAS GAN and the DCGAN baseline (a DCGAN discriminator).
 
-Four 4×4 stride-2 convs with LeakyReLU(0.2), S → S/16, then one linear unit: an
-unbounded score, not a probability (Wasserstein critic). No batch norm: the gradient
+Four 4×4 stride-2 convs with LeakyReLU(0.2), S → S/16, then one linear unit (or, with
+`patch`, one score per 46-px patch, averaged): an unbounded score, not a probability
+(Wasserstein critic). No batch norm: the gradient
 penalty constrains the gradient per sample, and batch norm couples the samples of a
 batch (Gulrajani et al. 2017, section 4); no other normalisation either, as in their nets.
 """
@@ -16,6 +17,10 @@ import torch.nn as nn
 @dataclass(frozen=True)
 class CriticConfig:
     width: int = 32  # channels of the first conv, doubled at each of the four stages
+    # score each 46-px patch of the S/16 × S/16 feature map with one shared 1×1 conv and average
+    # the scores (PatchGAN, Isola et al. 2017), instead of one linear unit over the whole map: the
+    # critic judges local texture wherever it is, and every chip is many samples, not one
+    patch: bool = False
 
 
 CRITIC_NETS = {"small": CriticConfig(32), "paper": CriticConfig(64)}
@@ -31,10 +36,14 @@ class Critic(nn.Module):
             layers += [nn.Conv2d(c_in, c_out, 4, stride=2, padding=1), nn.LeakyReLU(0.2)]
             c_in = c_out
         self.features = nn.Sequential(*layers)
-        self.score = nn.Linear(8 * w * (size // 16) ** 2, 1)
+        self.patch = cfg.patch
+        self.score = nn.Conv2d(8 * w, 1, 1) if cfg.patch else nn.Linear(8 * w * (size // 16) ** 2, 1)
         self.size = size
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         # (B, 1, S, S) in [-1, 1] → (B,) unbounded scores
         assert x.shape[1:] == (1, self.size, self.size), x.shape
-        return self.score(self.features(x).flatten(1))[:, 0]
+        features = self.features(x)  # (B, 8w, S/16, S/16)
+        if self.patch:
+            return self.score(features).mean(dim=(1, 2, 3))
+        return self.score(features.flatten(1))[:, 0]

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 
 from sasmi.gan.run import config_from_dict, load_weights, read_run
 
@@ -27,6 +28,10 @@ class GeneratorConfig:
     # the whole image: training starts from the render itself, so what the critic asks for is added
     # to a chip that already has the target and its shadow, not redrawn from nothing (docs/gan.md)
     residual: bool = False
+    # with `residual`: the correction is averaged over blocks of this many px and upsampled
+    # bilinearly, so it changes gray levels, shading and shadows above the speckle's scale and
+    # leaves the rendered speckle, whose statistics already match real chips, as it is; 1: per pixel
+    correction_scale: int = 1
 
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
@@ -68,7 +73,7 @@ class Generator(nn.Module):
             nn.Upsample(scale_factor=2, mode="nearest"), *_conv_norm_relu(2 * w, w, 3),
             nn.Conv2d(w, 1, 7, padding=3, padding_mode="reflect"),
         )
-        self.residual = cfg.residual
+        self.residual, self.correction_scale = cfg.residual, cfg.correction_scale
         if self.residual:
             nn.init.zeros_(self.net[-1].weight)
             nn.init.zeros_(self.net[-1].bias)
@@ -78,8 +83,13 @@ class Generator(nn.Module):
         assert render.ndim == 4 and render.shape[1] == 1 and render.shape[-1] % 4 == 0, render.shape
         if not self.residual:
             return torch.tanh(self.net(render))
+        correction = self.net(render)  # (B, 1, S, S) in atanh units
+        if self.correction_scale > 1:
+            k = self.correction_scale
+            correction = F.interpolate(F.avg_pool2d(correction, k), scale_factor=k, mode="bilinear",
+                                       align_corners=False)
         # 0.98: a black render pixel stays within reach of a gradient (tanh' = 0.04 there, not 0)
-        return torch.tanh(torch.atanh(render.clamp(-RENDER_REACH, RENDER_REACH)) + self.net(render))
+        return torch.tanh(torch.atanh(render.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
 
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",

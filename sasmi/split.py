@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import json
 import os
 import shutil
@@ -108,15 +109,23 @@ def _link(src: Path, dst: Path) -> None:
 
 
 def write_split(split: Split, out: str | os.PathLike) -> Path:
-    """OUT/{train,validation}/CATEGORY/NAME linking to the real chips, plus OUT/split.json."""
+    """OUT/{train,validation}/CATEGORY/NAME linking to the real chips, each side's own MANIFEST.csv
+    (so train can be split again, e.g. to tune a recipe on train alone), plus OUT/split.json."""
     out = Path(out)
     for side in SIDES:
         if (out / side).exists():
             raise SasmiError(f"--out {out}: {out / side} exists already (choose a new folder)")
+    rows = read_manifest(split.root)
     for side in SIDES:
         for rel in split.files[side]:
             dst = out / side / rel
             dst.parent.mkdir(parents=True, exist_ok=True)
             _link(split.root / rel, dst)
+        chosen = set(split.files[side])
+        table = io.StringIO()
+        writer = csv.DictWriter(table, fieldnames=list(rows[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(r for r in rows if r["file"] in chosen)
+        write_text(out / side / MANIFEST, table.getvalue())
     write_text(out / "split.json", json.dumps(split.to_json(), indent=1) + "\n")
     return out

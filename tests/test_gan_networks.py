@@ -59,6 +59,30 @@ def test_residual_generator_starts_as_the_render_and_can_leave_it():
     assert y.min() >= -1 and y.max() <= 1
 
 
+def test_correction_scale_keeps_the_renders_speckle():
+    """GeneratorConfig.correction_scale: the residual correction is smooth over that many px, so
+    the render's pixel-scale speckle passes through (the output / render pattern has no pixel-to-pixel
+    noise); at scale 1 the same weights change single pixels."""
+    from sasmi.gan.generator import RENDER_REACH
+
+    torch.manual_seed(0)
+    x = torch.rand(2, 1, 64, 64) * 1.8 - 0.9  # speckle-like: independent pixels
+
+    def correction(scale: int) -> torch.Tensor:
+        g = Generator(GeneratorConfig(width=8, blocks=1, residual=True, correction_scale=scale))
+        torch.manual_seed(1)
+        torch.nn.init.normal_(g.net[-1].weight, std=0.2)  # as after training: not zero
+        with torch.no_grad():
+            return torch.atanh(g(x).clamp(-0.9999, 0.9999)) - torch.atanh(x.clamp(-RENDER_REACH, RENDER_REACH))
+
+    def roughness(c: torch.Tensor) -> float:  # mean 1-px step relative to the correction's spread
+        return float((c[..., 1:] - c[..., :-1]).abs().mean() / c.std())
+
+    smooth, per_pixel = correction(4), correction(1)
+    assert smooth.abs().mean() > 0.05  # it does correct
+    assert roughness(smooth) < 0.5 * roughness(per_pixel), (roughness(smooth), roughness(per_pixel))
+
+
 def test_generator_presets_differ_only_in_size():
     small, paper = (sum(p.numel() for p in Generator(GENERATOR_NETS[k]).parameters()) for k in ("small", "paper"))
     assert small < paper / 10
@@ -73,6 +97,24 @@ def test_critic_scores_one_number_per_image_without_batch_norm(size):
     # per-sample: a sample's score does not depend on the rest of the batch
     x = torch.rand(4, 1, size, size)
     assert torch.allclose(critic(x)[:1], critic(x[:1]), atol=1e-6)
+
+
+def test_patch_critic_scores_a_pattern_alike_wherever_it_lies():
+    """CriticConfig.patch: one shared score per patch, averaged, so a bright mark moved by the
+    critic's stride (16 px) inside a flat chip scores the same; the whole-chip linear unit
+    weighs each position on its own, so there it does not."""
+    torch.manual_seed(0)
+
+    def chip_with_mark(at: int) -> torch.Tensor:
+        x = torch.full((1, 1, 128, 128), -0.5)
+        x[..., at:at + 5, at:at + 5] = 0.8
+        return x
+
+    moved = torch.cat([chip_with_mark(54), chip_with_mark(70)])
+    patch, whole = Critic(CriticConfig(width=8, patch=True), 128), Critic(CriticConfig(width=8), 128)
+    assert torch.allclose(*patch(moved), atol=1e-6)
+    assert not torch.allclose(*whole(moved), atol=1e-4)
+    assert sum(p.numel() for p in patch.score.parameters()) == 8 * 8 + 1  # the same at any size
 
 
 @pytest.mark.parametrize("size", [32, 64])

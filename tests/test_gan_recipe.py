@@ -193,8 +193,9 @@ def test_recipe_flags_from_the_command_line(tmp_path, data):
     assert main(["train", "sasgan", "--real", str(data["real"]), "--renders", str(data["renders"]), "--phi",
                  str(data["phi"]), "--out", str(out), "--size", "32", "--batch", "2", "--steps", "2", "--n-critic", "1",
                  "--device", "cpu", "--augment", "--regulariser", "r1", "--r1-gamma", "0.5", "--critic-lr", "1e-4",
-                 "--ema", "0.9", "--mask-weight", "10", "--mask-keep", "0.7"]) == 0
+                 "--ema", "0.9", "--mask-weight", "10", "--mask-keep", "0.7", "--patch-critic", "--residual"]) == 0
     config = torch.load(out / "checkpoints" / "last.pt", weights_only=True)["config"]
     assert config["augment"] == AugmentConfig.recommended().__dict__
+    assert config["critic"]["patch"] and config["generator"]["residual"]
     assert (config["regulariser"], config["r1_gamma"], config["critic_lr"], config["ema"], config["mask_weight"],
             config["mask_keep"]) == ("r1", 0.5, 1e-4, 0.9, 10.0, 0.7)

@@ -14,6 +14,7 @@ import torch
 
 from sasmi.gan.autoencoder import AutoencoderConfig
 from sasmi.gan.critic import CriticConfig
+from sasmi.errors import SasmiError
 from sasmi.gan.generator import GeneratorConfig
 from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
@@ -204,3 +205,14 @@ def test_checkpoints_from_before_the_config_moved_inside_still_load(tmp_path, ru
     generator = load_generator(run)
     assert generator.image_size == 32
     assert all(torch.equal(p, ckpt["state"]["generator"][k]) for k, p in generator.state_dict().items())
+
+
+def test_correction_scale_needs_the_residual_generator_and_must_divide_the_size():
+    def run(**generator) -> SasganRun:
+        return SasganRun(size=32, generator=GeneratorConfig(**generator)).validate()
+
+    assert run(residual=True, correction_scale=4).generator.correction_scale == 4
+    for bad in ({"correction_scale": 4}, {"residual": True, "correction_scale": 3},
+                {"residual": True, "correction_scale": 0}):
+        with pytest.raises(SasmiError, match="correction_scale"):
+            run(**bad)

@@ -115,6 +115,32 @@ def test_speckle_cell_correlates_speckle_over_the_resolution_cell():
     assert correlated.mean() == pytest.approx(1, abs=0.03) and correlated.var() == pytest.approx(1 / looks, rel=0.15)
 
 
+def test_patchiness_textures_the_floor_in_patches_of_patch_size():
+    """seafloor.patchiness / patch_size: a gamma texture (std / mean = patchiness) multiplies the
+    speckle, correlated over patches of patch_size; the noise floor under it stays untextured, and
+    a floor without patchiness keeps the draws it had."""
+    from sasmi.render.post import post_fields
+
+    size = 128
+    pixel = 6.0 / size
+    post = Post(speckle_looks=0.0, noise_floor=0.02)
+
+    def fields(**floor) -> tuple[np.ndarray, np.ndarray]:
+        return post_fields(flat_chip(post=post, seafloor=Seafloor(**floor), targets=()), size)
+
+    texture, offset = fields(patchiness=0.4, patch_size=6 * pixel)
+    assert texture.mean() == pytest.approx(1, abs=0.05) and texture.std() == pytest.approx(0.4, rel=0.15)
+    assert autocorrelation(texture, axis=0) > 0.8 and autocorrelation(texture, axis=1) > 0.8
+    fine, _ = fields(patchiness=0.4, patch_size=1.5 * pixel)
+    assert autocorrelation(fine, axis=1) < autocorrelation(texture, axis=1) - 0.2
+    np.testing.assert_array_equal(offset, 0.02)
+    speckled = dataclasses.replace(flat_chip(post=Post(speckle_looks=4.0), targets=()), seed=3)
+    textured = dataclasses.replace(speckled, seafloor=Seafloor(patchiness=0.3))
+    np.testing.assert_array_equal(post_fields(speckled, size)[0], post_fields(
+        dataclasses.replace(textured, seafloor=Seafloor(patchiness=0.0)), size)[0])
+    assert post_fields(textured, size)[0].var() > 1.2 * post_fields(speckled, size)[0].var()
+
+
 def test_lambert_squared_backscatter_sharpens_the_relief(renderer64):
     """seafloor.backscatter = lambert2 weighs each facet by cos^2(incidence): tilted facets stand out more
     (relief contrast std / mean 0.62 -> 0.88 measured); a flat floor keeps its calibrated level."""

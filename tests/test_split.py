@@ -72,6 +72,12 @@ def test_cli_writes_linked_folders(tmp_path, capsys):
             assert all((out / side / category / f).resolve() == (root / category / f).resolve() for f in files)
     assert main(["split", str(root), "--out", str(out)]) == 2  # never over an existing split
     assert "exists already" in capsys.readouterr().err
+    # each side carries its own MANIFEST, so train can be split again (a tuning split on train alone)
+    inner = tmp_path / "tune"
+    assert main(["split", str(out / "train"), "--out", str(inner)]) == 0
+    tune = json.loads((inner / "split.json").read_text())
+    assert sorted(tune["groups"]["train"] + tune["groups"]["validation"]) == info["groups"]["train"]
+    assert all(tune["counts"][side]["targets"] > 0 for side in ("train", "validation"))
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):

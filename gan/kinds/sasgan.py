@@ -39,6 +39,11 @@ class SasganRun(GanRun):
         check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
         check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
         check_number("--mask-ring", self.mask_ring, 1, self.size // 2, integer=True, why="pixels, below S/2")
+        scale = self.generator.correction_scale
+        check_number("generator.correction_scale", scale, 1, 16, integer=True, why="px")
+        if scale > 1 and (not self.generator.residual or self.size % scale):
+            raise SasmiError(f"generator.correction_scale = {scale}: needs generator.residual = true and a --size "
+                             f"that it divides ({self.size})")
         return self
 
 

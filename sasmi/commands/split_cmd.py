@@ -1,8 +1,9 @@
 """`sasmi split ROOT --out DIR`: train / validation folders by scene group, linking to the real chips.
 
 Assign whole scene groups of ROOT/MANIFEST.csv to train (~1 - fraction) and validation (~fraction),
-balanced per category; write DIR/{train,validation}/CATEGORY/ as links to the real chips and
-DIR/split.json. Deterministic.
+balanced per category; write DIR/{train,validation}/CATEGORY/ as links to the real chips, each
+side's own MANIFEST.csv (split DIR/train again to tune on train alone) and DIR/split.json.
+Deterministic.
 """
 from __future__ import annotations
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+from dataclasses import replace
 
 from sasmi.commands.common import add_device, add_threads, apply_threads, resolve_device
 
@@ -67,6 +68,9 @@ def _add_gan(p: argparse.ArgumentParser) -> None:
     p.add_argument("--augment", action="store_true",
                    help="show the critic real and fake through the same differentiable augmentation (translation, "
                         "cutout, brightness/contrast, up-down flip; never left-right) (default off)")
+    p.add_argument("--patch-critic", action="store_true",
+                   help="the critic scores every 46-px patch with shared weights and averages them (PatchGAN) instead "
+                        "of one linear unit over the whole chip (default off)")
     p.add_argument("--net", choices=NETS, help="network sizes: small (CPU) or paper (256², GPU) (default small)")
 
 
@@ -104,9 +108,9 @@ def add_parser(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)  # before torch is imported
     from sasmi.gan import distributed
-    from sasmi.gan.critic import CRITIC_NETS
+    from sasmi.gan.critic import CRITIC_NETS, CriticConfig
     from sasmi.gan.dcgan import DCGAN_NETS
-    from sasmi.gan.generator import GENERATOR_NETS
+    from sasmi.gan.generator import GENERATOR_NETS, GeneratorConfig
     from sasmi.gan.kinds.sasgan import SASGAN
     from sasmi.gan.loop import resolve_config, train
 
@@ -122,11 +126,9 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "net", None):
         overrides["critic"] = CRITIC_NETS[args.net]
         overrides |= {"generator": GENERATOR_NETS[args.net]} if kind is SASGAN else {"dcgan": DCGAN_NETS[args.net]}
+    if getattr(args, "patch_critic", False):
+        overrides["critic"] = replace(overrides.get("critic", CriticConfig()), patch=True)
     if getattr(args, "residual", False):
-        from dataclasses import replace
-
-        from sasmi.gan.generator import GeneratorConfig
-
         overrides["generator"] = replace(overrides.get("generator", GeneratorConfig()), residual=True)
     device = distributed.start(resolve_device(args.device))
     main = distributed.world().main

@@ -67,7 +67,13 @@ def _interp_uniform(x: np.ndarray, z: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) speckle (mean 1; all 1 when off) and offset (noise floor x speckle + noise; gray levels)."""
+    """(H, W) speckle (mean 1; all 1 when off) and offset (noise floor x speckle + noise; gray levels).
+
+    With `seafloor.patchiness` the speckle is multiplied by a correlated gamma texture (mean 1,
+    std / mean = patchiness, patches of `patch_size`): the compound (K-distribution) model of
+    seafloor clutter, where the sediment's backscatter strength varies in patches under the
+    speckle. It multiplies every echo, as the speckle does; the noise floor stays untextured.
+    """
     post = scene.post
     rng = np.random.default_rng([scene.seed, 11])
     speckle = np.ones((size, size))
@@ -81,7 +87,13 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
             speckle = rng.gamma(post.speckle_looks, 1.0 / post.speckle_looks, size=(size, size))
     if post.noise_std > 0:
         noise = rng.normal(0.0, post.noise_std, size=(size, size))
-    return speckle, noise + post.noise_floor * speckle
+    offset = noise + post.noise_floor * speckle  # the background has no sediment texture
+    floor = scene.seafloor
+    if floor.patchiness > 0:  # its own stream: chips without texture keep the draws they had
+        sigma = floor.patch_size / (scene.sonar.chip_size / size) / FWHM_PER_SIGMA
+        speckle = speckle * correlated_gamma(np.random.default_rng([scene.seed, 12]), floor.patchiness**-2, size,
+                                             sigma, sigma)
+    return speckle, offset
 
 
 def post_maps(scene: Scene, g: Geometry) -> Maps:
