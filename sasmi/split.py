@@ -35,6 +35,7 @@ class Split:
     seed: int
     files: dict[str, list[str]] = field(default_factory=dict)   # side -> sorted relative paths
     groups: dict[str, list[str]] = field(default_factory=dict)  # side -> sorted scene groups
+    manifest: list[dict[str, str]] = field(default_factory=list)  # ROOT/MANIFEST.csv's rows, as read
 
     def counts(self) -> dict[str, dict[str, int]]:
         """side -> category -> chip count."""
@@ -94,7 +95,7 @@ def split_chips(root: str | os.PathLike, fraction: float = 0.25, seed: int = 0) 
     side_of = {g: ("validation" if g in validation else "train") for g in per_group}
     files = {side: sorted(r["file"] for r in rows if side_of[r["scene_group"]] == side) for side in SIDES}
     groups = {side: sorted(g for g in per_group if side_of[g] == side) for side in SIDES}
-    return Split(root=root, fraction=fraction, seed=seed, files=files, groups=groups)
+    return Split(root=root, fraction=fraction, seed=seed, files=files, groups=groups, manifest=rows)
 
 
 def _link(src: Path, dst: Path) -> None:
@@ -115,7 +116,6 @@ def write_split(split: Split, out: str | os.PathLike) -> Path:
     for side in SIDES:
         if (out / side).exists():
             raise SasmiError(f"--out {out}: {out / side} exists already (choose a new folder)")
-    rows = read_manifest(split.root)
     for side in SIDES:
         for rel in split.files[side]:
             dst = out / side / rel
@@ -123,9 +123,9 @@ def write_split(split: Split, out: str | os.PathLike) -> Path:
             _link(split.root / rel, dst)
         chosen = set(split.files[side])
         table = io.StringIO()
-        writer = csv.DictWriter(table, fieldnames=list(rows[0]), lineterminator="\n")
+        writer = csv.DictWriter(table, fieldnames=list(split.manifest[0]), lineterminator="\n")
         writer.writeheader()
-        writer.writerows(r for r in rows if r["file"] in chosen)
+        writer.writerows(r for r in split.manifest if r["file"] in chosen)
         write_text(out / side / MANIFEST, table.getvalue())
     write_text(out / "split.json", json.dumps(split.to_json(), indent=1) + "\n")
     return out

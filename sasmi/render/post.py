@@ -78,8 +78,8 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng([scene.seed, 11])
     speckle = np.ones((size, size))
     noise = np.zeros((size, size))
+    pixel = scene.sonar.chip_size / size  # m
     if post.speckle_looks > 0:
-        pixel = scene.sonar.chip_size / size  # m
         if post.speckle_cell_range > 0 or post.speckle_cell_track > 0:
             speckle = correlated_gamma(rng, post.speckle_looks, size, post.speckle_cell_track / pixel / FWHM_PER_SIGMA,
                                        post.speckle_cell_range / pixel / FWHM_PER_SIGMA)
@@ -90,7 +90,7 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     offset = noise + post.noise_floor * speckle  # the background has no sediment texture
     floor = scene.seafloor
     if floor.patchiness > 0:  # its own stream: chips without texture keep the draws they had
-        sigma = floor.patch_size / (scene.sonar.chip_size / size) / FWHM_PER_SIGMA
+        sigma = floor.patch_size / pixel / FWHM_PER_SIGMA
         speckle = speckle * correlated_gamma(np.random.default_rng([scene.seed, 12]), floor.patchiness**-2, size,
                                              sigma, sigma)
     return speckle, offset
