@@ -136,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = resolve_config(kind, args.out, overrides, args.resume)
         distributed.barrier()  # every process has looked at --out before the main one writes into it
         done = train(kind, cfg, args.out, inputs, device, args.resume)
+        distributed.barrier()  # leave together: a process gone while the main one writes can abort the group
     finally:
         distributed.stop()
     if not main:
