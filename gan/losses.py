@@ -95,18 +95,45 @@ def mask_contrasts(images: torch.Tensor, masks: torch.Tensor, ring: int) -> tupl
     return mean(near(shadow)) - mean(shadow), mean(target) - mean(near(target))
 
 
+def highlight_peaks(images: torch.Tensor, masks: torch.Tensor, bright_percentile: float = 99.0) -> torch.Tensor:
+    """Per image: how far the target's brightest spot rises above the floor's bright speckle, (B,), NaN if absent.
+
+    images: (B, 1, S, S) in [-1, 1]; masks as in `mask_contrasts`. On the image blurred over
+    3 × 3 px: the mean of the 4 brightest target pixels minus the `bright_percentile` of the
+    whole seafloor, the floor's level detached (the term raises highlights, it never dims the
+    floor). Below 0 the target has nothing brighter than the floor's speckle: the test by
+    which `sasmi evaluate` calls a target lost (sasmi/eval/preservation.py).
+    """
+    blurred = F.avg_pool2d(images, 3, stride=1, padding=1, count_include_pad=False)
+    peaks = []
+    for image, mask in zip(blurred, masks):
+        target, floor = image[mask == 1], image[mask == 0]
+        if target.numel() == 0 or floor.numel() == 0:
+            peaks.append(image.sum() * 0.0 + float("nan"))
+            continue
+        top = target.topk(min(4, target.numel())).values.mean()
+        peaks.append(top - torch.quantile(floor.detach(), bright_percentile / 100.0))
+    return torch.stack(peaks)
+
+
 def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Tensor, keep: float,
-                       ring: int) -> torch.Tensor:
+                       ring: int, highlight: str = "mean") -> torch.Tensor:
     """Hinge keeping shadows darker and highlights brighter than the floor around them.
 
     For each image and each of (shadow, highlight) present in its mask: max(0, keep·c_render
     − c_fake), c the contrast of `mask_contrasts`; mean over the terms present (0 if none).
     fake, render: (B, 1, S, S) in [-1, 1]; masks: the render's labels. keep = 0.5 lets the
     generator halve a render's shadow contrast for free but not erase or invert it.
+    highlight = "peak" measures the highlight by `highlight_peaks` instead of the target's mean:
+    a thin bright strip on a bright floor keeps its rise above the floor's speckle.
     """
+    def contrasts(images: torch.Tensor) -> torch.Tensor:  # (2, B)
+        shadow, target = mask_contrasts(images, masks, ring)
+        return torch.stack([shadow, highlight_peaks(images, masks) if highlight == "peak" else target])
+
     with torch.no_grad():
-        wanted = torch.stack(mask_contrasts(render, masks, ring)).clamp_min(0) * keep  # (2, B)
-    got = torch.stack(mask_contrasts(fake, masks, ring))
+        wanted = contrasts(render).clamp_min(0) * keep
+    got = contrasts(fake)
     present = ~torch.isnan(got)
     if not present.any():
         return fake.sum() * 0.0  # keeps the graph; no shadow or target in this batch

@@ -161,6 +161,32 @@ def test_mask_contrast_gradient_darkens_shadows_and_brightens_highlights():
     assert mask_contrast_loss(render, render, masks, keep=0.5, ring=4) == 0  # the render keeps its own contrast
 
 
+def test_peak_highlight_term_catches_a_thin_strip_dimmed_into_the_floor():
+    # the render's target: a bright 2-px strip on its facing side, the rest of it darker than the
+    # floor (its unlit sides); the translation evens the target out just above the floor level,
+    # so its mean contrast is kept while nothing on it rises above the floor's speckle (lost)
+    masks = torch.zeros(1, 1, SIZE, SIZE, dtype=torch.uint8)
+    masks[..., 12:20, 10:16] = 1
+    floor = -0.3 + 0.1 * torch.randn(1, 1, SIZE, SIZE, generator=torch.Generator().manual_seed(0))
+    render = torch.where(masks == 1, torch.tensor(-0.6), floor)
+    render[..., 12:20, 10:12] = 0.9
+    fake = torch.where(masks == 1, torch.tensor(-0.18), floor).requires_grad_(True)
+    assert mask_contrast_loss(fake, render, masks, keep=0.5, ring=4) == 0  # the mean term lets it pass
+    loss = mask_contrast_loss(fake, render, masks, keep=0.5, ring=4, highlight="peak")
+    assert loss > 0.1
+    loss.backward()
+    assert (fake.grad[masks == 1] < 0).any() and (fake.grad <= 0).all()  # brighten the target, dim nothing
+    assert mask_contrast_loss(render, render, masks, keep=0.5, ring=4, highlight="peak") == 0
+
+
+def test_the_run_passes_its_highlight_measure_to_the_mask_term(data):
+    logged = {}
+    for highlight in ("mean", "peak"):
+        phases = _phases(data, mask_weight=1.0, mask_highlight=highlight, phi_weight=0.0)
+        logged[highlight] = phases.generator_step()["loss/mask"]  # same seed: same nets, same batch
+    assert logged["mean"] != logged["peak"], logged
+
+
 def _shadow_contrast(phases, renders, masks) -> float:
     with torch.no_grad():
         shadow, _ = mask_contrasts(phases.state["generator"](renders), masks, ring=8)

@@ -58,3 +58,7 @@ def test_fit_reuses_a_phi_run_and_refuses_a_bad_recipe(tmp_path, capsys):
     assert main([*base, "--out", str(tmp_path / "third"), "--gan", str(recipe)]) == 2
     err = capsys.readouterr().err
     assert "mask_wieght: not a SAS GAN setting" in err and not (tmp_path / "third").exists()
+    recipe.write_text('mask_highlight = "max"\n')
+    assert main([*base, "--out", str(tmp_path / "third"), "--gan", str(recipe)]) == 2
+    err = capsys.readouterr().err
+    assert f"--gan {recipe}: mask_highlight = 'max'" in err and not (tmp_path / "third").exists()

@@ -30,6 +30,7 @@ class SasganRun(GanRun):
     mask_weight: float = 0.0  # weight of the mask contrast term (needs the renders' masks/); 0: off
     mask_keep: float = 0.5  # fraction of a render's shadow/highlight contrast the translation must keep
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
+    mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
 
     def validate(self) -> "SasganRun":
         super().validate()
@@ -39,6 +40,8 @@ class SasganRun(GanRun):
         check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
         check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
         check_number("--mask-ring", self.mask_ring, 1, self.size // 2, integer=True, why="pixels, below S/2")
+        if self.mask_highlight not in ("mean", "peak"):
+            raise SasmiError(f"mask_highlight = {self.mask_highlight!r}: choose \"mean\" or \"peak\"")
         scale = self.generator.correction_scale
         check_number("generator.correction_scale", scale, 1, 16, integer=True, why="px")
         if scale > 1 and (not self.generator.residual or self.size % scale):
@@ -100,7 +103,7 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
         loss = adversarial + cfg.phi_weight * constraint
         logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
         if masks is not None:
-            contrast = mask_contrast_loss(fake, render, masks, cfg.mask_keep, cfg.mask_ring)
+            contrast = mask_contrast_loss(fake, render, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
         opt_g.zero_grad(set_to_none=True)
