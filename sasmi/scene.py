@@ -84,8 +84,9 @@ class Seafloor:
     rock_radius: float = _spec(0.15, _positive, "> 0", "m; size of each bump")
     backscatter: str = _spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
                              "scattering law: lambert (cos of incidence, as today), lambert2 (cos^2, Lambert's law)")
-    patchiness: float = _spec(0.0, _nonneg, ">= 0", "std / mean of the sediment's backscatter strength over the "
-                              "floor (a gamma texture under the speckle: K-distributed clutter); 0 = uniform")
+    patchiness: float = _spec(0.0, lambda v: 0 <= v <= 2, "in [0, 2]", "std / mean of the sediment's backscatter "
+                              "strength over the floor (a gamma texture under the speckle: K-distributed clutter); "
+                              "0 = uniform; above 2 most of the floor renders black")
     patch_size: float = _spec(1.0, _positive, "> 0", "m; width (FWHM) of the patches of stronger and weaker backscatter")
 
 

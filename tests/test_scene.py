@@ -38,6 +38,7 @@ def write(tmp_path, text: str):
     ("[seafloor]\nalbedo = {uniform = [0.5, 0.2]}\n", "seafloor.albedo.uniform: lower bound"),
     ("[seafloor]\nalbedo = {gauss = [0.5, 0.2]}\n", "seafloor.albedo: a distribution is one of"),
     ("[seafloor]\nalbedo = 1.5\n", "seafloor.albedo: 1.5 is not allowed (allowed: in [0, 1])"),
+    ("[seafloor]\npatchiness = 5\n", "seafloor.patchiness: 5.0 is not allowed (allowed: in [0, 2])"),
     ('[[targets]]\nshape = "donut"\n', "targets[0].shape: 'donut' is not allowed"),
     ('[[targets]]\nshape = "torus"\nradius = 0.2\ntube_radius = 0.2\n', "targets[0].tube_radius: 0.2 m closes the ring"),
     ('[[targets]]\nshape = "box"\nheight = 0.4\nburial = 0.4\n', "targets[0].burial: 0.4 m buries the whole target"),
