@@ -28,6 +28,7 @@ from tqdm import tqdm
 
 from sasmi.errors import SasmiError
 from sasmi.images import atomic_path, write_gray, write_text
+from sasmi.limits import Range
 from sasmi.preprocess import check_size, signed_to_unit
 
 MAX_SIZE = 1024  # every image of a set is held in memory at S²: 1000 images at 1024² are 4 GB
@@ -49,12 +50,11 @@ def provenance() -> dict:
 
 
 def check_number(flag: str, value, low: float, high: float, integer: bool = False, why: str = "") -> None:
-    """A SasmiError naming `flag` unless `value` is a finite number in [low, high]."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
-        and low <= value <= high and (not integer or float(value).is_integer())
-    if not ok:
-        kind = "an integer" if integer else "a number"
-        raise SasmiError(f"{flag} {value}: must be {kind} in [{low:g}, {high:g}]{f' ({why})' if why else ''}")
+    """A SasmiError naming `flag` unless `value` is a finite number in [low, high] (sasmi.limits' wording)."""
+    is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not is_number or integer and math.isfinite(value) and not float(value).is_integer():
+        raise SasmiError(f"{flag}: {value!r} is not {'an integer' if integer else 'a number'}")
+    Range(low, high, why, int if integer else float).check(value, flag)
 
 
 @dataclass(frozen=True)
