@@ -58,7 +58,9 @@ def show_defaults(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         for action in p._actions:
             if action.help in (None, argparse.SUPPRESS) or "%(default)" in action.help or "default" in action.help:
                 continue
-            if action.default in (None, argparse.SUPPRESS, False) or action.option_strings == []:
+            # by identity: 0 == False, and a --seed's default 0 is worth showing, a switch's False is not
+            if any(action.default is nothing for nothing in (None, argparse.SUPPRESS, False)) or action.default == "" \
+                    or action.option_strings == []:
                 continue
             action.help += " (default: %(default)s)"
     return parser

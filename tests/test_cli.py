@@ -18,8 +18,10 @@ def test_every_help_names_every_default():
     missing = []
     for parser in _subparsers(build_parser()):
         for action in parser._actions:
-            if action.option_strings and action.default not in (None, False, argparse.SUPPRESS) \
-                    and action.help not in (None, argparse.SUPPRESS):
+            # by identity: a default of 0 equals False and must still be shown
+            no_default = any(action.default is nothing for nothing in (None, False, argparse.SUPPRESS)) \
+                or action.default == ""
+            if action.option_strings and not no_default and action.help not in (None, argparse.SUPPRESS):
                 text = parser._get_formatter()._expand_help(action)
                 if "default" not in text:
                     missing.append(f"{parser.prog} {action.option_strings[0]}")

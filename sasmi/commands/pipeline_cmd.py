@@ -8,7 +8,6 @@ from sasmi.commands.common import add_device, add_threads, apply_threads, resolv
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="one command from real chips to a trained SAS GAN and its realism report",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter,
                        description="Trains φ into RUN/phi, renders the preset into RUN/renders, trains the SAS GAN "
                                    "into RUN/sasgan within the time budget, translates into RUN/translated and "
                                    "writes RUN/report/ (sasmi evaluate's metrics.json). Rerun to resume; raise "
@@ -22,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=128, help="image size, a multiple of 16")
     p.add_argument("--preset", default="cylinder_chip", help="scene preset: a TOML file or a shipped preset's name")
     p.add_argument("--renders", type=int, default=400, help="chips rendered for the GAN and the report")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the renders and of every training")
     p.add_argument("--gan", default="small_data",
                    help="SAS GAN settings: a shipped recipe (small_data, baseline) or a TOML file of them")
     p.add_argument("--phi", metavar="RUN", default="",
