@@ -54,6 +54,14 @@ class Encoder(nn.Module):
         h = F.adaptive_avg_pool2d(self.stages(x), PHI_GRID)
         return h.flatten(1)
 
+    def feature_maps(self, x: torch.Tensor) -> list[torch.Tensor]:
+        """Each stage's output: (B, widths[i], S/2^(i+1), S/2^(i+1)), non-negative; x as in forward."""
+        maps = []
+        for i in range(0, len(self.stages), 3):  # [conv, ReLU, pool] per stage
+            x = self.stages[i + 2](self.stages[i + 1](self.stages[i](x)))
+            maps.append(x)
+        return maps
+
 
 class Decoder(nn.Module):
     def __init__(self, cfg: AutoencoderConfig):

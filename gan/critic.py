@@ -1,4 +1,5 @@
-"""The critic shared by the SAS GAN and the DCGAN baseline (a DCGAN discriminator).
+"""The critic shared by the SAS GAN and the DCGAN baseline (a DCGAN discriminator), and the
+SAS GAN's alternative that judges φ's feature maps instead of pixels (`PhiCritic`).
 
 Four 4×4 stride-2 convs with LeakyReLU(0.2), S → S/16, then one linear unit (or, with
 `patch`, one score per 46-px patch, averaged): an unbounded score, not a probability
@@ -21,6 +22,10 @@ class CriticConfig:
     # the scores (PatchGAN, Isola et al. 2017), instead of one linear unit over the whole map: the
     # critic judges local texture wherever it is, and every chip is many samples, not one
     patch: bool = False
+    # judge the frozen φ encoder's four feature maps instead of the pixels (Projected GAN, Sauer et
+    # al. 2021): φ learnt what real chips look like from every real chip, seafloor included, so the
+    # critic's ~100 target chips train small heads on top of it, not a whole net (SAS GAN only)
+    phi_features: bool = False
 
 
 CRITIC_NETS = {"small": CriticConfig(32), "paper": CriticConfig(64)}
@@ -47,3 +52,45 @@ class Critic(nn.Module):
         if self.patch:
             return self.score(features).mean(dim=(1, 2, 3))
         return self.score(features.flatten(1))[:, 0]
+
+
+class PhiCritic(nn.Module):
+    """Heads on the frozen φ encoder's feature maps, their scores summed: (B, 1, S, S) → (B,).
+
+    Each map (c, r, r) goes down by 4×4 stride-2 convs with LeakyReLU(0.2) to 4 × 4, then one
+    linear unit: every head sees the whole chip at its own scale (S/2 speckle up to S/16 shapes).
+    The encoder is held outside the module's parameters: the critic's optimiser and
+    `requires_grad_` never reach it, and φ stays the one the φ constraint and the evaluation use.
+    Gradients still flow through it to the input, for the penalty and the generator.
+    """
+
+    def __init__(self, cfg: CriticConfig, size: int, encoder: nn.Module):
+        super().__init__()
+        assert size % 16 == 0 and not cfg.patch, (size, cfg)
+        self.encoder = [encoder]  # a list: not a submodule (see above)
+        with torch.no_grad():
+            shapes = [m.shape[1:3] for m in encoder.feature_maps(torch.zeros(1, 1, size, size,
+                                                                        device=next(encoder.parameters()).device))]
+        w = 2 * cfg.width
+        self.heads = nn.ModuleList()
+        for channels, side in shapes:
+            layers, c_in = [], channels
+            while side > 4:
+                layers += [nn.Conv2d(c_in, w, 4, stride=2, padding=1), nn.LeakyReLU(0.2)]
+                c_in, side = w, side // 2
+            self.heads.append(nn.Sequential(*layers, nn.Flatten(), nn.Linear(c_in * side * side, 1)))
+        self.size = size
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        # (B, 1, S, S) in [-1, 1] → (B,) unbounded scores
+        assert x.shape[1:] == (1, self.size, self.size), x.shape
+        maps = self.encoder[0].feature_maps(x)  # 4 × (B, c, r, r), r = S/2 … S/16
+        return sum(head(m)[:, 0] for head, m in zip(self.heads, maps))
+
+
+def make_critic(cfg: CriticConfig, size: int, encoder: nn.Module | None = None) -> nn.Module:
+    """The critic `cfg` asks for; `encoder` (the frozen φ) is needed by `phi_features` only."""
+    if cfg.phi_features:
+        assert encoder is not None, "phi_features needs the φ encoder"
+        return PhiCritic(cfg, size, encoder)
+    return Critic(cfg, size)

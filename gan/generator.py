@@ -32,6 +32,11 @@ class GeneratorConfig:
     # bilinearly, so it changes gray levels, shading and shadows above the speckle's scale and
     # leaves the rendered speckle, whose statistics already match real chips, as it is; 1: per pixel
     correction_scale: int = 1
+    # with `residual`: first remap the render's gray levels through a monotone curve chosen per chip
+    # from the render's own histogram, then add the smooth correction. The correction moves local
+    # levels but cannot reshape the speckle's distribution (the bright tail, the spread), which a
+    # pointwise curve can, without touching where anything is (docs/gan.md)
+    tone_curve: bool = False
 
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
@@ -60,6 +65,37 @@ class ResidualBlock(nn.Module):
         return x + self.body(x)
 
 
+TONE_KNOTS = 16  # segments of the tone curve over [-1, 1]
+TONE_QUANTILES = torch.linspace(0.01, 0.99, 16)  # what the curve is chosen from: the render's gray levels
+
+
+class ToneCurve(nn.Module):
+    """A monotone piecewise-linear map of [-1, 1] onto itself, one per image, chosen from the
+    image's quantiles: (B, 1, S, S) in [-1, 1] → same. The ends stay at ±1; the segments'
+    rises are a softmax, so the map is increasing and starts as the identity (last layer zero)."""
+
+    def __init__(self, hidden: int = 32):
+        super().__init__()
+        self.choose = nn.Sequential(nn.Linear(len(TONE_QUANTILES), hidden), nn.ReLU(), nn.Linear(hidden, TONE_KNOTS))
+        nn.init.zeros_(self.choose[-1].weight)
+        nn.init.zeros_(self.choose[-1].bias)
+
+    def knots(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, K + 1) values of the curve at −1, −1 + 2/K, …, 1."""
+        levels = torch.quantile(x.flatten(1), TONE_QUANTILES.to(x), dim=1).T  # (B, 16) in [-1, 1]
+        rises = torch.softmax(self.choose(levels), dim=1)  # (B, K), sums to 1
+        return torch.cat([torch.full_like(rises[:, :1], -1.0), 2.0 * rises.cumsum(dim=1) - 1.0], dim=1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        knots = self.knots(x)  # (B, K + 1)
+        position = (x.clamp(-1.0, 1.0) + 1.0) * (TONE_KNOTS / 2.0)  # (B, 1, S, S) in [0, K]
+        segment = position.floor().clamp(max=TONE_KNOTS - 1)
+        index = segment.long().flatten(1)  # (B, S²)
+        low, high = knots.gather(1, index), knots.gather(1, index + 1)
+        frac = (position - segment).flatten(1)
+        return (low + (high - low) * frac).view_as(x)
+
+
 class Generator(nn.Module):
     def __init__(self, cfg: GeneratorConfig):
         super().__init__()
@@ -74,6 +110,7 @@ class Generator(nn.Module):
             nn.Conv2d(w, 1, 7, padding=3, padding_mode="reflect"),
         )
         self.residual, self.correction_scale = cfg.residual, cfg.correction_scale
+        self.tone = ToneCurve() if cfg.tone_curve else None
         if self.residual:
             nn.init.zeros_(self.net[-1].weight)
             nn.init.zeros_(self.net[-1].bias)
@@ -88,8 +125,9 @@ class Generator(nn.Module):
             k = self.correction_scale
             correction = F.interpolate(F.avg_pool2d(correction, k), scale_factor=k, mode="bilinear",
                                        align_corners=False)
+        toned = render if self.tone is None else self.tone(render)  # (B, 1, S, S) in [-1, 1]
         # 0.98: a black render pixel stays within reach of a gradient (tanh' = 0.04 there, not 0)
-        return torch.tanh(torch.atanh(render.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
+        return torch.tanh(torch.atanh(toned.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
 
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",

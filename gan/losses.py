@@ -138,3 +138,27 @@ def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Te
     if not present.any():
         return fake.sum() * 0.0  # keeps the graph; no shadow or target in this batch
     return (wanted[present] - got[present]).clamp_min(0.0).mean()
+
+
+LEVEL_QUANTILES = torch.linspace(0.02, 0.98, 25)  # and the tail: 0.99, 0.995
+LEVEL_TAIL = torch.tensor([0.99, 0.995])
+
+
+def gray_levels(images: torch.Tensor) -> torch.Tensor:
+    """Each chip's gray-level distribution as 27 of its quantiles, the bright tail included:
+    (B, 1, S, S) in [-1, 1] → (B, 27). Differentiable (through the sort)."""
+    q = torch.cat([LEVEL_QUANTILES, LEVEL_TAIL]).to(images)
+    return torch.quantile(images.flatten(1), q, dim=1).T
+
+
+def energy_distance(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Energy distance between two samples of vectors, x (n, D) and y (m, D), n, m ≥ 2:
+    2 E‖x − y‖ − E‖x − x′‖ − E‖y − y′‖ (Székely & Rizzo), the within-sample means over distinct
+    pairs. Zero in expectation when both come from one distribution, no bandwidth to choose."""
+    assert x.ndim == y.ndim == 2 and x.shape[1] == y.shape[1] and len(x) > 1 and len(y) > 1, (x.shape, y.shape)
+
+    def mean_distance(a: torch.Tensor, b: torch.Tensor, distinct: bool) -> torch.Tensor:
+        d = (a[:, None] - b[None]).pow(2).sum(-1).clamp_min(1e-12).sqrt()  # (n, m); clamp: no NaN gradient at 0
+        return (d.sum() - d.diagonal().sum()) / (len(a) * (len(a) - 1)) if distinct else d.mean()
+
+    return 2 * mean_distance(x, y, False) - mean_distance(x, x, True) - mean_distance(y, y, True)

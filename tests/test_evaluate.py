@@ -53,6 +53,21 @@ def test_fid_matches_closed_form_for_gaussians():
     assert ev.fid(a, b) == pytest.approx(closed_form_fid(mu_a, sa, mu_b, sb), abs=1e-6)
 
 
+def test_fid_mean_part_is_what_a_shift_removes():
+    rng = np.random.default_rng(2)
+    d = 6
+    a = exact_gaussian(rng, 200, np.zeros(d), random_cov(rng, d))
+    b = exact_gaussian(rng, 300, rng.standard_normal(d), random_cov(rng, d))
+    mean_part = ev.fid_mean_part(a, b)
+    assert mean_part == pytest.approx(np.sum((a.mean(0) - b.mean(0)) ** 2))
+    aligned = a - a.mean(0) + b.mean(0)  # the same spread, no offset
+    assert ev.fid(a, b) - mean_part == pytest.approx(ev.fid(aligned, b), abs=1e-6)
+    assert ev.fid_mean_part(aligned, b) == pytest.approx(0.0, abs=1e-12)
+    wider = a.mean(0) + 2 * (a - a.mean(0))  # the same mean, twice the spread
+    assert ev.fid_mean_part(wider, b) == pytest.approx(mean_part)
+    assert ev.fid(wider, b) > ev.fid(a, b) + 1
+
+
 def test_fid_rank_deficient_matches_full_eigen_route():
     # N < D: the N×N route must equal the textbook D×D formula with symmetric square roots
     rng = np.random.default_rng(2)

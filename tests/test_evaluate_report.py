@@ -100,6 +100,7 @@ def test_report_from_a_trained_run(data, capsys):
         assert row["fid"] >= 0 and row["fid_std"] > 0, name
         assert 0 <= row["precision"] <= 1 and 0 <= row["recall"] <= 1, name
         assert math.isfinite(row["kid"]) and row["kid_std"] > 0, name
+        assert 0 <= row["fid_mean_part"] <= row["fid"] * 1.5, name  # real→real: one split against the splits' mean
     # "shifted" has the real chips' texture and targets; floor lacks targets, renders lack speckle
     r = m["realism"]
     for worse in ("floor", "renders"):

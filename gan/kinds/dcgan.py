@@ -13,6 +13,7 @@ from sasmi.gan.distributed import parallel, world
 from sasmi.gan.kinds.common import GanRun, Noise, adam, adversarial_loss, critic_phase, critic_view, grad_norm
 from sasmi.gan.loop import Kind, Logs, Phases
 from sasmi.gan.run import check_number
+from sasmi.errors import SasmiError
 from sasmi.images import write_gray
 
 
@@ -24,6 +25,8 @@ class DcganRun(GanRun):
     def validate(self) -> "DcganRun":
         super().validate()
         check_number("--final-samples", self.final_samples, 0, 10 ** 5, integer=True)
+        if self.critic.phi_features:
+            raise SasmiError("critic.phi_features: the DCGAN baseline has no φ; it is the SAS GAN's option")
         return self
 
 

@@ -9,14 +9,14 @@ import torch
 from torch.optim.swa_utils import AveragedModel
 
 from sasmi.gan.autoencoder import load_encoder
-from sasmi.gan.critic import Critic
+from sasmi.gan.critic import make_critic
 from sasmi.gan.data import Batches, ImageSet
 from sasmi.gan.distributed import parallel
 from sasmi.gan.generator import Generator, GeneratorConfig
 from sasmi.gan.kinds.common import (GanRun, Noise, adam, adversarial_loss, before_after, critic_phase, critic_view,
                               grad_norm, spread)
 from sasmi.gan.loop import Kind, Logs, Phases
-from sasmi.gan.losses import mask_contrast_loss, phi_loss
+from sasmi.gan.losses import energy_distance, gray_levels, mask_contrast_loss, phi_loss
 from sasmi.gan.run import check_number, file_fingerprint
 from sasmi.errors import SasmiError
 
@@ -31,6 +31,10 @@ class SasganRun(GanRun):
     mask_keep: float = 0.5  # fraction of a render's shadow/highlight contrast the translation must keep
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
     mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
+    # weight of the gray-level term: the energy distance between the translations' per-chip gray-level
+    # distributions (quantiles, tail included) and the real chips' (0: off). A critic that learns from
+    # ~100 chips does not see them; the real chips' spread of levels is what is matched, chip by chip
+    levels_weight: float = 0.0
 
     def validate(self) -> "SasganRun":
         super().validate()
@@ -39,11 +43,14 @@ class SasganRun(GanRun):
         check_number("--ema", self.ema, 0.0, 0.99999, why="0 turns it off")
         check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
         check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
+        check_number("levels_weight", self.levels_weight, 0.0, 1e6)
         check_number("--mask-ring", self.mask_ring, 1, self.size // 2, integer=True, why="pixels, below S/2")
         if self.mask_highlight not in ("mean", "peak"):
             raise SasmiError(f"mask_highlight = {self.mask_highlight!r}: choose \"mean\" or \"peak\"")
         scale = self.generator.correction_scale
         check_number("generator.correction_scale", scale, 1, 16, integer=True, why="px")
+        if self.generator.tone_curve and not self.generator.residual:
+            raise SasmiError("generator.tone_curve needs generator.residual = true (the curve remaps the render)")
         if scale > 1 and (not self.generator.residual or self.size % scale):
             raise SasmiError(f"generator.correction_scale = {scale}: needs generator.residual = true and a --size "
                              f"that it divides ({self.size})")
@@ -69,6 +76,7 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     render_batches = Batches(renders, cfg.batch, seed=cfg.seed + 1)
     noise, view_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4)
     fixed = renders.center(spread(len(renders), 8)).to(device)  # (n, 1, S, S) in [-1, 1]
+    real_levels = gray_levels(real.center(list(range(len(real))))).to(device)  # (N, 27): every real chip's levels
     encoder = load_encoder(inputs["phi"], device)  # (B, 1, S, S) in [-1, 1] → (B, 1024)
     if encoder.image_size != cfg.size:
         raise SasmiError(f"--phi {inputs['phi']}: the autoencoder was trained at {encoder.image_size} px; "
@@ -76,7 +84,7 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
 
     # ---- models and optimisers
     generator = Generator(cfg.generator).to(device)
-    critic = Critic(cfg.critic, cfg.size).to(device)
+    critic = make_critic(cfg.critic, cfg.size, encoder).to(device)
     average = moving_average(generator, cfg.ema) if cfg.ema > 0 else None
     opt_g = adam(generator.parameters(), cfg.lr, cfg)
     opt_c = adam(critic.parameters(), cfg.critic_lr or cfg.lr, cfg)
@@ -106,6 +114,10 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
             contrast = mask_contrast_loss(fake, render, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
+        if cfg.levels_weight > 0:
+            levels = energy_distance(gray_levels(fake), real_levels)
+            loss = loss + cfg.levels_weight * levels
+            logs["loss/levels"] = levels.item()
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
         logs["grad_norm/generator"] = grad_norm(generator)

@@ -59,6 +59,14 @@ def fid(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
     return max(float(value), 0.0)  # a squared distance; only round-off makes it negative
 
 
+def fid_mean_part(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
+    """‖μa − μb‖², the part of `fid` that a shift of every feature vector by one offset would
+    remove: what the two sets differ in on average (gray level, texture), as against how
+    they spread (which scenes occur, their variety), the rest."""
+    a, b = _as_features(feats_a, 1, "fid_mean_part"), _as_features(feats_b, 1, "fid_mean_part")
+    return float(np.sum((a.mean(0) - b.mean(0)) ** 2))
+
+
 def one_blas_thread():
     """Context: BLAS on one thread. The metrics are many small (≤ N×N) products; on a busy
     machine, OpenBLAS threads waiting for a core made them 50× slower (measured, 2 cores)."""

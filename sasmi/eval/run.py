@@ -124,7 +124,8 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
 
 
 def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig) -> dict:
-    """FID ± (bootstrap), its matched-size ratio to real→real, KID ± and precision/recall per set."""
+    """FID ± (bootstrap), its matched-size ratio to real→real, the part of FID from the means, KID ±
+    and precision/recall per set."""
     scale = metrics.rms(real.phi)  # one scalar for all sets: FID ratios and precision/recall do not change
     order = np.random.default_rng(cfg.seed).permutation(len(real.phi))
     half_a, half_b = real.phi[order[:len(order) // 2]], real.phi[order[len(order) // 2:]]
@@ -132,7 +133,8 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
     precision, recall = metrics.precision_recall(half_a, half_b, cfg.pr_k)
     rows = {REAL_VS_REAL: {"n": [len(half_a), len(half_b)], "fid": reference.value, "fid_std": reference.std,
-                           "fid_ratio": 1.0, "fid_ratio_std": math.nan, "kid": k.value, "kid_std": k.std,
+                           "fid_ratio": 1.0, "fid_ratio_std": math.nan,
+                           "fid_mean_part": metrics.fid_mean_part(half_a, half_b), "kid": k.value, "kid_std": k.std,
                            "precision": precision, "recall": recall}}
     for i, s in enumerate(tqdm(sets, desc="realism", unit="set", leave=False, disable=None)):
         seed = cfg.seed + 1 + i
@@ -141,7 +143,8 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
         k = metrics.kid(s.phi / scale, real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, seed)
         precision, recall = metrics.precision_recall(real.phi, s.phi, cfg.pr_k)
         rows[s.name] = {"n": len(s.phi), "fid": f.value, "fid_std": f.std, "fid_ratio": ratio.value,
-                        "fid_ratio_std": ratio.std, "kid": k.value, "kid_std": k.std,
+                        "fid_ratio_std": ratio.std, "fid_mean_part": metrics.fid_mean_part(s.phi, real.phi),
+                        "kid": k.value, "kid_std": k.std,
                         "precision": precision, "recall": recall}
     return rows
 

@@ -1,0 +1,106 @@
+"""Gray levels: the generator's tone curve (monotone, the identity at first, one per chip) and the
+gray-level term (an energy distance between per-chip level distributions) that moves them toward real."""
+from dataclasses import replace
+
+import pytest
+import torch
+
+from sasmi.errors import SasmiError
+from sasmi.gan.critic import CriticConfig
+from sasmi.gan.data import ImageSet
+from sasmi.gan.generator import RENDER_REACH, Generator, GeneratorConfig, ToneCurve
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.losses import energy_distance, gray_levels
+from test_gan_train import toy_gan_inputs
+
+SIZE = 32
+
+
+def _chips(levels: list[float], size: int = 16) -> torch.Tensor:
+    """(B, 1, S, S) in [-1, 1]: speckle-like chips around the given mean levels."""
+    g = torch.Generator().manual_seed(0)
+    return torch.stack([(m + 0.2 * torch.randn(1, size, size, generator=g)).clamp(-1, 1) for m in levels])
+
+
+def test_tone_curve_starts_as_the_identity_and_stays_monotone_with_fixed_ends():
+    curve = ToneCurve()
+    x = _chips([-0.6, 0.0, 0.5])
+    torch.testing.assert_close(curve(x), x)
+    generator = Generator(GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True))
+    torch.testing.assert_close(generator(x), x.clamp(-RENDER_REACH, RENDER_REACH))  # training starts at the render
+
+    torch.manual_seed(1)
+    for p in curve.parameters():
+        torch.nn.init.normal_(p, std=3.0)  # any weights
+    knots = curve.knots(x)
+    assert (knots.diff(dim=1) >= 0).all()  # never decreasing (a softmax may flatten segments, not invert them)
+    assert torch.allclose(knots[:, 0], torch.tensor(-1.0)) and torch.allclose(knots[:, -1], torch.tensor(1.0))
+    ramp = torch.linspace(-1, 1, 64).expand(3, 1, 1, 64)
+    assert (curve(ramp).diff(dim=-1) >= 0).all()  # order of gray levels is kept: nothing moves, only levels change
+
+
+def test_each_chip_gets_its_own_curve_from_its_gray_levels():
+    """Dark chips must be brightened and bright ones darkened to one level: no single curve can
+    do both (it would have to map the same gray level two ways), a per-chip one can."""
+    chips = _chips([-0.6, -0.5, 0.3, 0.4])
+    target = chips - chips.mean(dim=(1, 2, 3), keepdim=True)  # every chip centred on 0
+    torch.manual_seed(0)
+    curve = ToneCurve()
+    optimiser = torch.optim.Adam(curve.parameters(), lr=1e-2)
+    for _ in range(300):
+        loss = ((curve(chips) - target) ** 2).mean()
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    means = curve(chips).mean(dim=(1, 2, 3))
+    assert means.abs().max() < 0.1, means  # dark chips raised, bright ones lowered, all near 0
+    assert (means[:2] - chips[:2].mean(dim=(1, 2, 3)) > 0.3).all() and (means[2:] < chips[2:].mean(dim=(1, 2, 3)) - 0.2).all()
+
+
+def test_tone_curve_needs_the_residual_generator():
+    with pytest.raises(SasmiError, match="tone_curve"):
+        SasganRun(generator=GeneratorConfig(tone_curve=True)).validate()
+
+
+def test_energy_distance_closed_form_and_zero_for_one_distribution():
+    x, y = torch.tensor([[0.0], [1.0]]), torch.tensor([[2.0], [3.0]])
+    # 2 · mean |x − y| (2, 3, 1, 2 → 2) − |0 − 1| − |2 − 3|
+    assert energy_distance(x, y).item() == pytest.approx(2.0)
+    assert energy_distance(x, y) == energy_distance(y, x)
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.randn(400, 5, generator=g), torch.randn(400, 5, generator=g)
+    assert abs(energy_distance(a, b).item()) < 0.02
+    assert energy_distance(a + 0.5, b).item() > 0.2
+
+
+def test_gray_levels_are_ordered_quantiles_with_gradients():
+    x = (torch.rand(3, 1, SIZE, SIZE) * 2 - 1).requires_grad_(True)
+    levels = gray_levels(x)
+    assert levels.shape == (3, 27) and (levels.diff(dim=1) >= 0).all()
+    levels[:, -1].sum().backward()  # the bright tail reaches the brightest pixels
+    assert x.grad.abs().sum() > 0
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return toy_gan_inputs(tmp_path_factory.mktemp("levels"), SIZE, phi_steps=5)
+
+
+def test_gray_level_term_moves_translations_toward_the_real_levels(data):
+    """The toy renders are a flat 0.35 floor; the real chips a skewed gamma speckle: the term,
+    through the tone curve, must bring the translations' levels toward the real ones."""
+    renders = ImageSet(data["renders"], SIZE).center(list(range(8)))
+    real = ImageSet(data["real"], SIZE)
+    real_levels = gray_levels(real.center(list(range(len(real)))))
+    toy = SasganRun(size=SIZE, batch=4, n_critic=1, phi_weight=0.0, critic=CriticConfig(4),
+                    generator=GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True))
+    distance = {}
+    for weight in (0.0, 10.0):
+        torch.manual_seed(0)
+        phases = SASGAN.build(replace(toy, levels_weight=weight).validate(), data, torch.device("cpu"))
+        for _ in range(20):
+            phases.generator_step()
+        with torch.no_grad():
+            distance[weight] = energy_distance(gray_levels(phases.state["generator"](renders)), real_levels).item()
+    start = energy_distance(gray_levels(renders), real_levels).item()
+    assert distance[10.0] < 0.5 * start and distance[10.0] < 0.5 * distance[0.0], (start, distance)
