@@ -115,11 +115,13 @@ class Generator(nn.Module):
             nn.init.zeros_(self.net[-1].weight)
             nn.init.zeros_(self.net[-1].bias)
 
-    def forward(self, render: torch.Tensor) -> torch.Tensor:
-        # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]
+    def forward(self, render: torch.Tensor, also_toned: bool = False):
+        # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]; with also_toned, (that, the render after
+        # the tone curve alone): the gray-level term trains the curve, not the spatial correction
         assert render.ndim == 4 and render.shape[1] == 1 and render.shape[-1] % 4 == 0, render.shape
         if not self.residual:
-            return torch.tanh(self.net(render))
+            image = torch.tanh(self.net(render))
+            return (image, image) if also_toned else image
         correction = self.net(render)  # (B, 1, S, S) in atanh units
         if self.correction_scale > 1:
             k = self.correction_scale
@@ -127,7 +129,8 @@ class Generator(nn.Module):
                                        align_corners=False)
         toned = render if self.tone is None else self.tone(render)  # (B, 1, S, S) in [-1, 1]
         # 0.98: a black render pixel stays within reach of a gradient (tanh' = 0.04 there, not 0)
-        return torch.tanh(torch.atanh(toned.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
+        image = torch.tanh(torch.atanh(toned.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
+        return (image, toned) if also_toned else image
 
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",

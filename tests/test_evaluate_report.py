@@ -101,10 +101,13 @@ def test_report_from_a_trained_run(data, capsys):
         assert 0 <= row["precision"] <= 1 and 0 <= row["recall"] <= 1, name
         assert math.isfinite(row["kid"]) and row["kid_std"] > 0, name
         assert 0 <= row["fid_mean_part"] <= row["fid"] * 1.5, name  # real→real: one split against the splits' mean
+        assert math.isfinite(row["gray_levels"]), name
     # "shifted" has the real chips' texture and targets; floor lacks targets, renders lack speckle
     r = m["realism"]
     for worse in ("floor", "renders"):
         assert r[worse]["fid_ratio"] > r["shifted"]["fid_ratio"] and r[worse]["kid"] > r["shifted"]["kid"], worse
+    # "shifted" keeps the real chips' gray levels; the flat renders' levels are far from them
+    assert r["renders"]["gray_levels"] > 5 * max(r["shifted"]["gray_levels"], r["real→real"]["gray_levels"], 0.01)
     assert set(m["copying"]) == {"renders", "shifted", "floor"}
     assert set(m["copying"]["floor"]) == {"pixel", "phi"}
     assert any("fewer than" in w for w in m["warnings"])

@@ -46,8 +46,8 @@ def pm(value: float, std: float, fmt: str) -> str:
 
 
 def mean_share(row: dict) -> str:
-    """The mean part of a row's FID as a percentage (`—` in metrics.json files written before it)."""
-    if "fid_mean_part" not in row or not row["fid"] > 0:
+    """The mean part of a row's FID as a percentage (`—` where FID is 0)."""
+    if not row["fid"] > 0:
         return "—"
     return f"{100 * row['fid_mean_part'] / row['fid']:.0f} %"
 
@@ -57,12 +57,13 @@ def realism_markdown(rows: dict, real: FeatureSet) -> str:
              f"{real.images.shape[-1]}² px. Each row compares its set with the real set; {REAL_VS_REAL} compares "
              "two disjoint random halves of the real set, the floor any generator can reach at that sample size.",
              "",
-             "| set | images | φ-FID | ÷ real→real | from the means | KID ×10³ | precision | recall |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| set | images | φ-FID | ÷ real→real | from the means | KID ×10³ | precision | recall | gray levels ×10³ |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in rows.items():
         n = " + ".join(map(str, r["n"])) if isinstance(r["n"], list) else str(r["n"])
         lines.append(f"| {name} | {n} | {pm(r['fid'], r['fid_std'], '.3g')} | {pm(r['fid_ratio'], r['fid_ratio_std'], '.2f')} | "
-                     f"{mean_share(r)} | {pm(r['kid'] * 1e3, r['kid_std'] * 1e3, '.3f')} | {r['precision']:.2f} | {r['recall']:.2f} |")
+                     f"{mean_share(r)} | {pm(r['kid'] * 1e3, r['kid_std'] * 1e3, '.3f')} | {r['precision']:.2f} | {r['recall']:.2f} | "
+                     f"{r['gray_levels'] * 1e3:.0f} |")
     lines += ["", "- **φ-FID**: the set against the whole real set, ± the std over bootstrap resamples; real→real "
               "is the mean ± std over random splits of the real set into halves.",
               "- **÷ real→real**: FID of the set against a random real half B divided by FID of the other half A "
@@ -72,6 +73,9 @@ def realism_markdown(rows: dict, real: FeatureSet) -> str:
               "- **from the means**: the share of φ-FID that is ‖μ_set − μ_real‖², what one shift of every "
               "image's φ would remove (the set differs on average: gray level, texture); the rest is how the "
               "sets spread (which scenes occur, their variety), which a per-image correction hardly reaches.",
+              "- **gray levels**: energy distance between the chips' gray-level distributions (27 quantiles of "
+              "each chip, its bright tail included) and the real chips', without φ; ≈ 0 (it can be negative) "
+              "when each chip's levels could be a real chip's. real→real: its two halves.",
               "- **KID**: unbiased MMD² with the cubic polynomial kernel on φ divided by the real set's rms entry, "
               "mean ± std over random subsets; ≈ 0 (it can be negative) when the set looks real, reliable for "
               "small sets.",

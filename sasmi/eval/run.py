@@ -124,18 +124,21 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
 
 
 def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig) -> dict:
-    """FID ± (bootstrap), its matched-size ratio to real→real, the part of FID from the means, KID ±
-    and precision/recall per set."""
+    """FID ± (bootstrap), its matched-size ratio to real→real, the part of FID from the means, KID ±,
+    precision/recall and the distance of the chips' gray-level distributions (no φ) per set."""
     scale = metrics.rms(real.phi)  # one scalar for all sets: FID ratios and precision/recall do not change
     order = np.random.default_rng(cfg.seed).permutation(len(real.phi))
     half_a, half_b = real.phi[order[:len(order) // 2]], real.phi[order[len(order) // 2:]]
     reference = metrics.fid_real_split(real.phi, cfg.bootstrap, cfg.seed)
     k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
     precision, recall = metrics.precision_recall(half_a, half_b, cfg.pr_k)
+    real_levels = gray_levels(real.images)
+    half = len(order) // 2
     rows = {REAL_VS_REAL: {"n": [len(half_a), len(half_b)], "fid": reference.value, "fid_std": reference.std,
                            "fid_ratio": 1.0, "fid_ratio_std": math.nan,
                            "fid_mean_part": metrics.fid_mean_part(half_a, half_b), "kid": k.value, "kid_std": k.std,
-                           "precision": precision, "recall": recall}}
+                           "precision": precision, "recall": recall,
+                           "gray_levels": level_distance(real_levels[order[:half]], real_levels[order[half:]])}}
     for i, s in enumerate(tqdm(sets, desc="realism", unit="set", leave=False, disable=None)):
         seed = cfg.seed + 1 + i
         f = metrics.fid_bootstrap(s.phi, real.phi, cfg.bootstrap, seed)
@@ -145,8 +148,25 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
         rows[s.name] = {"n": len(s.phi), "fid": f.value, "fid_std": f.std, "fid_ratio": ratio.value,
                         "fid_ratio_std": ratio.std, "fid_mean_part": metrics.fid_mean_part(s.phi, real.phi),
                         "kid": k.value, "kid_std": k.std,
-                        "precision": precision, "recall": recall}
+                        "precision": precision, "recall": recall,
+                        "gray_levels": level_distance(gray_levels(s.images), real_levels)}
     return rows
+
+
+def gray_levels(images: np.ndarray):
+    """(N, S, S) uint8 → (N, 27) torch: each chip's gray-level quantiles, as the SAS GAN's gray-level term sees them."""
+    import torch
+
+    from sasmi.gan.losses import gray_levels as quantiles
+
+    return quantiles(torch.from_numpy(images).float()[:, None] / 127.5 - 1.0)
+
+
+def level_distance(a, b) -> float:
+    """Energy distance between two sets of per-chip gray-level quantiles (≈ 0: alike)."""
+    from sasmi.gan.losses import energy_distance
+
+    return float(energy_distance(a, b))
 
 
 def tsne_map(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig
