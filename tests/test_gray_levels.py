@@ -57,9 +57,11 @@ def test_each_chip_gets_its_own_curve_from_its_gray_levels():
     assert (means[:2] - chips[:2].mean(dim=(1, 2, 3)) > 0.3).all() and (means[2:] < chips[2:].mean(dim=(1, 2, 3)) - 0.2).all()
 
 
-def test_tone_curve_needs_the_residual_generator():
+def test_tone_curve_and_gray_level_settings_that_cannot_work_are_refused():
     with pytest.raises(SasmiError, match="tone_curve"):
         SasganRun(generator=GeneratorConfig(tone_curve=True)).validate()
+    with pytest.raises(SasmiError, match="levels_weight.*--batch 2"):
+        SasganRun(levels_weight=1.0, batch=1).validate()
 
 
 def test_energy_distance_closed_form_and_zero_for_one_distribution():
@@ -113,3 +115,15 @@ def test_gray_level_term_trains_the_tone_curve_toward_the_real_levels(data):
     term.backward()
     assert all(p.grad is None or not p.grad.any() for p in generator.net.parameters())
     assert any(p.grad is not None and p.grad.any() for p in generator.tone.parameters())
+
+
+def test_gray_level_term_with_one_real_chip_is_refused(tmp_path, data):
+    import shutil
+
+    one = tmp_path / "one"
+    one.mkdir()
+    shutil.copy(sorted(data["real"].glob("*.png"))[0], one)
+    cfg = SasganRun(size=SIZE, batch=2, critic=CriticConfig(4), levels_weight=1.0,
+                    generator=GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True))
+    with pytest.raises(SasmiError, match="2 real chips"):
+        SASGAN.build(cfg.validate(), {**data, "real": one}, torch.device("cpu"))

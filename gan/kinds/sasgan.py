@@ -44,6 +44,8 @@ class SasganRun(GanRun):
         check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
         check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
         check_number("levels_weight", self.levels_weight, 0.0, 1e6)
+        if self.levels_weight > 0 and self.batch < 2:
+            raise SasmiError(f"levels_weight = {self.levels_weight:g} compares the chips of a batch: needs --batch 2 or more")
         check_number("--mask-ring", self.mask_ring, 1, self.size // 2, integer=True, why="pixels, below S/2")
         if self.mask_highlight not in ("mean", "peak"):
             raise SasmiError(f"mask_highlight = {self.mask_highlight!r}: choose \"mean\" or \"peak\"")
@@ -76,7 +78,10 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     render_batches = Batches(renders, cfg.batch, seed=cfg.seed + 1)
     noise, view_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4)
     fixed = renders.center(spread(len(renders), 8)).to(device)  # (n, 1, S, S) in [-1, 1]
-    real_levels = gray_levels(real.center(list(range(len(real))))).to(device)  # (N, 27): every real chip's levels
+    if cfg.levels_weight > 0:
+        if len(real) < 2:
+            raise SasmiError(f"--real {inputs['real']}: the gray-level term (levels_weight) needs 2 real chips or more")
+        real_levels = gray_levels(real.center(list(range(len(real))))).to(device)  # (N, 27): every real chip's levels
     encoder = load_encoder(inputs["phi"], device)  # (B, 1, S, S) in [-1, 1] → (B, 1024)
     if encoder.image_size != cfg.size:
         raise SasmiError(f"--phi {inputs['phi']}: the autoencoder was trained at {encoder.image_size} px; "
