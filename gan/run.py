@@ -91,22 +91,40 @@ class RunConfig:
 
 
 def config_from_dict(cls, data: dict, source: str):
-    """A (nested) config dataclass from its asdict() form; missing fields keep their defaults."""
-    kwargs = {}
+    """A (nested) config dataclass from its asdict() form; missing fields keep their defaults.
+    A value of the wrong type is a SasmiError naming `source` and the field."""
     try:
-        for f in fields(cls):
-            if f.name not in data:
-                continue
-            default = f.default if f.default is not MISSING else f.default_factory()
-            value = data[f.name]
-            if is_dataclass(default):
-                value = config_from_dict(type(default), value, source)
-            elif isinstance(default, tuple):
-                value = tuple(value)
-            kwargs[f.name] = value
-        return cls(**kwargs)
+        return _build(cls, data)
     except (TypeError, ValueError, AttributeError) as e:
         raise SasmiError(f"{source}: its {cls.__name__} cannot be rebuilt ({e})") from None
+
+
+def _build(cls, data: dict, prefix: str = ""):
+    kwargs = {}
+    for f in fields(cls):
+        if f.name not in data:
+            continue
+        default = f.default if f.default is not MISSING else f.default_factory()
+        value = data[f.name]
+        if is_dataclass(default):
+            value = _build(type(default), value, f"{prefix}{f.name}.")
+        elif isinstance(default, tuple):
+            value = tuple(value)
+        elif not _same_kind(value, default):
+            raise TypeError(f"{prefix}{f.name} = {value!r}: expected {type(default).__name__}")
+        kwargs[f.name] = value
+    return cls(**kwargs)
+
+
+def _same_kind(value, default) -> bool:
+    """A setting's value has its default's type (an integer may stand for a float; a bool for nothing else)."""
+    if isinstance(default, bool) or isinstance(value, bool):
+        return isinstance(value, bool) and isinstance(default, bool)
+    if isinstance(default, float):
+        return isinstance(value, (int, float))
+    if isinstance(default, (int, str)):
+        return isinstance(value, type(default))
+    return True
 
 
 def fingerprint(paths: list[Path], root: Path) -> str:

@@ -232,8 +232,9 @@ def sasgan_settings(recipe: str) -> dict:
         if is_dataclass(nested) and (not isinstance(value, dict)
                                      or set(value) - {f.name for f in fields(nested)}):
             raise SasmiError(f"--gan {path}: [{key}] holds a key that is not a setting of it")
+    cfg = config_from_dict(SasganRun, raw, f"--gan {path}")
     try:
-        cfg = config_from_dict(SasganRun, raw, str(path)).validate()
+        cfg.validate()
     except SasmiError as e:
         raise SasmiError(f"--gan {path}: {e}") from None
     return {key: getattr(cfg, key) for key in raw}

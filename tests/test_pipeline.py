@@ -62,3 +62,10 @@ def test_fit_reuses_a_phi_run_and_refuses_a_bad_recipe(tmp_path, capsys):
     assert main([*base, "--out", str(tmp_path / "third"), "--gan", str(recipe)]) == 2
     err = capsys.readouterr().err
     assert f"--gan {recipe}: mask_highlight = 'max'" in err and not (tmp_path / "third").exists()
+    for text, named in (('[critic]\nphi_features = "yes"\n', "critic.phi_features = 'yes': expected bool"),
+                        ("n_critic = 2.5\n", "n_critic = 2.5: expected int")):
+        recipe.write_text(text)  # a string is truthy: it would have switched the option on
+        assert main([*base, "--out", str(tmp_path / "third"), "--gan", str(recipe)]) == 2
+        err = capsys.readouterr().err
+        assert f"--gan {recipe}: its SasganRun cannot be rebuilt ({named})" in err, err
+        assert len(err.strip().splitlines()) == 1 and not (tmp_path / "third").exists()
