@@ -151,6 +151,9 @@ def gray_levels(images: torch.Tensor) -> torch.Tensor:
     return torch.quantile(images.flatten(1), q, dim=1).T
 
 
+DISTANCE_ROWS = 64
+
+
 def energy_distance(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     """Energy distance between two samples of vectors, x (n, D) and y (m, D), n, m ≥ 2:
     2 E‖x − y‖ − E‖x − x′‖ − E‖y − y′‖ (Székely & Rizzo), the within-sample means over distinct
@@ -158,7 +161,13 @@ def energy_distance(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     assert x.ndim == y.ndim == 2 and x.shape[1] == y.shape[1] and len(x) > 1 and len(y) > 1, (x.shape, y.shape)
 
     def mean_distance(a: torch.Tensor, b: torch.Tensor, distinct: bool) -> torch.Tensor:
-        d = (a[:, None] - b[None]).pow(2).sum(-1).clamp_min(1e-12).sqrt()  # (n, m); clamp: no NaN gradient at 0
-        return (d.sum() - d.diagonal().sum()) / (len(a) * (len(a) - 1)) if distinct else d.mean()
+        total = a.new_zeros(())
+        for i in range(0, len(a), DISTANCE_ROWS):  # (rows, m, D) at a time: 20000 chips fit in memory
+            d = (a[i:i + DISTANCE_ROWS, None] - b[None]).pow(2).sum(-1).clamp_min(1e-12).sqrt()  # clamp: no NaN gradient at 0
+            if distinct:  # leave out each chip's distance to itself
+                rows = torch.arange(len(d), device=d.device)
+                d = d.index_put((rows, rows + i), d.new_zeros(len(d)))
+            total = total + d.sum()
+        return total / (len(a) * (len(a) - 1) if distinct else len(a) * len(b))
 
     return 2 * mean_distance(x, y, False) - mean_distance(x, x, True) - mean_distance(y, y, True)

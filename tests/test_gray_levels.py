@@ -127,3 +127,14 @@ def test_gray_level_term_with_one_real_chip_is_refused(tmp_path, data):
                     generator=GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True))
     with pytest.raises(SasmiError, match="2 real chips"):
         SASGAN.build(cfg.validate(), {**data, "real": one}, torch.device("cpu"))
+
+
+def test_energy_distance_in_row_blocks_equals_the_whole_matrix(monkeypatch):
+    """Large sets (the evaluation's 20000 chips) are summed a block of rows at a time."""
+    import sasmi.gan.losses as losses
+
+    g = torch.Generator().manual_seed(3)
+    x, y = torch.randn(11, 4, generator=g), torch.randn(7, 4, generator=g) + 0.3
+    whole = energy_distance(x, y)
+    monkeypatch.setattr(losses, "DISTANCE_ROWS", 3)
+    assert energy_distance(x, y).item() == pytest.approx(whole.item(), abs=1e-5)
