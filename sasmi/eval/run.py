@@ -153,13 +153,15 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     return rows
 
 
-def gray_levels(images: np.ndarray):
-    """(N, S, S) uint8 → (N, 27) torch: each chip's gray-level quantiles, as the SAS GAN's gray-level term sees them."""
+def gray_levels(images: np.ndarray, block: int = 256):
+    """(N, S, S) uint8 → (N, 27) torch: each chip's gray-level quantiles, as the SAS GAN's gray-level
+    term sees them; in blocks, so that a set of 20000 chips is never held as floats at once."""
     import torch
 
     from sasmi.gan.losses import gray_levels as quantiles
 
-    return quantiles(torch.from_numpy(images).float()[:, None] / 127.5 - 1.0)
+    return torch.cat([quantiles(torch.from_numpy(images[i:i + block]).float()[:, None] / 127.5 - 1.0)
+                      for i in range(0, len(images), block)])
 
 
 def level_distance(a, b) -> float:
