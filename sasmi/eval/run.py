@@ -128,12 +128,12 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     precision/recall and the distance of the chips' gray-level distributions (no φ) per set."""
     scale = metrics.rms(real.phi)  # one scalar for all sets: FID ratios and precision/recall do not change
     order = np.random.default_rng(cfg.seed).permutation(len(real.phi))
-    half_a, half_b = real.phi[order[:len(order) // 2]], real.phi[order[len(order) // 2:]]
+    half = len(order) // 2
+    half_a, half_b = real.phi[order[:half]], real.phi[order[half:]]
     reference = metrics.fid_real_split(real.phi, cfg.bootstrap, cfg.seed)
     k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
     precision, recall = metrics.precision_recall(half_a, half_b, cfg.pr_k)
     real_levels = gray_levels(real.images)
-    half = len(order) // 2
     rows = {REAL_VS_REAL: {"n": [len(half_a), len(half_b)], "fid": reference.value, "fid_std": reference.std,
                            "fid_ratio": 1.0, "fid_ratio_std": math.nan,
                            "fid_mean_part": metrics.fid_mean_part(half_a, half_b), "kid": k.value, "kid_std": k.std,
@@ -159,8 +159,9 @@ def gray_levels(images: np.ndarray, block: int = 256):
     import torch
 
     from sasmi.gan.losses import gray_levels as quantiles
+    from sasmi.preprocess import unit_to_signed
 
-    return torch.cat([quantiles(torch.from_numpy(images[i:i + block]).float()[:, None] / 127.5 - 1.0)
+    return torch.cat([quantiles(unit_to_signed(torch.from_numpy(images[i:i + block]).float()[:, None] / 255.0))
                       for i in range(0, len(images), block)])
 
 
