@@ -33,10 +33,15 @@ class GeneratorConfig:
     # leaves the rendered speckle, whose statistics already match real chips, as it is; 1: per pixel
     correction_scale: int = 1
     # with `residual`: first remap the render's gray levels through a monotone curve chosen per chip
-    # from the render's own histogram, then add the smooth correction. The correction moves local
+    # from the render's own histogram, its knots at the chip's quantiles, then add the smooth correction. The correction moves local
     # levels but cannot reshape the speckle's distribution (the bright tail, the spread), which a
     # pointwise curve can, without touching where anything is (docs/gan.md)
     tone_curve: bool = False
+    # with `tone_curve`: the curve also reads a random code drawn per chip, so one render can take any
+    # of many gray-level distributions. Real chips' levels vary from chip to chip more than the
+    # renders' do, and a curve fixed by the render can only spread them as much as the renders
+    # spread; the gray-level term, an energy distance between sets, rewards the real spread (docs/gan.md)
+    tone_style: bool = False
 
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
@@ -65,35 +70,50 @@ class ResidualBlock(nn.Module):
         return x + self.body(x)
 
 
-TONE_KNOTS = 16  # segments of the tone curve over [-1, 1]
-TONE_QUANTILES = torch.linspace(0.01, 0.99, 16)  # what the curve is chosen from: the render's gray levels
+# where the curve's knots sit: at these quantiles of each chip's own gray levels, its darkest and
+# brightest pixels included. Most of a SAS chip lies in the darkest quarter of the range, where
+# knots evenly spaced over [-1, 1] would leave three segments to shape nine tenths of the pixels
+TONE_PROBS = torch.cat([torch.tensor([0.0]), torch.linspace(0.02, 0.98, 25), torch.tensor([0.99, 0.995, 1.0])])
+TONE_STYLE = 4  # entries of the random code beside them, with `tone_style`
 
 
 class ToneCurve(nn.Module):
-    """A monotone piecewise-linear map of [-1, 1] onto itself, one per image, chosen from the
-    image's quantiles: (B, 1, S, S) in [-1, 1] → same. The ends stay at ±1; the segments'
-    rises are a softmax, so the map is increasing and starts as the identity (last layer zero)."""
+    """A monotone piecewise-linear map of gray levels, one per image: (B, 1, S, S) in [-1, 1] →
+    same. Its knots sit at the image's own quantiles (TONE_PROBS), so every segment holds a share
+    of the pixels; a small net reads those quantiles and chooses where each knot goes. The gaps
+    between the new levels (and from −1 and to 1) are a softmax, so the map is increasing and
+    stays in [-1, 1]; they start as the image's own gaps (last layer zero), so it starts as the
+    identity. With `style` entries, a code (B, style) ~ N(0, 1) is read beside the quantiles."""
 
-    def __init__(self, hidden: int = 32):
+    def __init__(self, hidden: int = 32, style: int = 0):
         super().__init__()
-        self.choose = nn.Sequential(nn.Linear(len(TONE_QUANTILES), hidden), nn.ReLU(), nn.Linear(hidden, TONE_KNOTS))
+        self.style = style
+        self.choose = nn.Sequential(nn.Linear(len(TONE_PROBS) + style, hidden), nn.ReLU(),
+                                    nn.Linear(hidden, len(TONE_PROBS) + 1))
         nn.init.zeros_(self.choose[-1].weight)
         nn.init.zeros_(self.choose[-1].bias)
 
-    def knots(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, K + 1) values of the curve at −1, −1 + 2/K, …, 1."""
-        levels = torch.quantile(x.flatten(1), TONE_QUANTILES.to(x), dim=1).T  # (B, 16) in [-1, 1]
-        rises = torch.softmax(self.choose(levels), dim=1)  # (B, K), sums to 1
-        return torch.cat([torch.full_like(rises[:, :1], -1.0), 2.0 * rises.cumsum(dim=1) - 1.0], dim=1)
+    def knots(self, x: torch.Tensor, code: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The image's quantiles and the levels they go to: (B, K), (B, K), K = len(TONE_PROBS)."""
+        levels = torch.quantile(x.flatten(1), TONE_PROBS.to(x), dim=1).T.contiguous()  # (B, K) in [-1, 1]
+        edges = torch.cat([-torch.ones_like(levels[:, :1]), levels, torch.ones_like(levels[:, :1])], dim=1)
+        gaps = edges.diff(dim=1).clamp_min(1e-6)  # (B, K + 1), sum ≈ 2; a floor: the log of a tie stays finite
+        seen = levels
+        if self.style:
+            code = torch.randn(len(x), self.style, device=x.device, dtype=x.dtype) if code is None else code
+            assert code.shape == (len(x), self.style), code.shape
+            seen = torch.cat([levels, code.to(x)], dim=1)  # (B, K + style)
+        new_gaps = 2.0 * torch.softmax(gaps.log() + self.choose(seen), dim=1)  # (B, K + 1), sums to 2
+        return levels, (new_gaps.cumsum(dim=1)[:, :-1] - 1.0).clamp(-1.0, 1.0)  # clamp: rounding only
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        knots = self.knots(x)  # (B, K + 1)
-        position = (x.clamp(-1.0, 1.0) + 1.0) * (TONE_KNOTS / 2.0)  # (B, 1, S, S) in [0, K]
-        segment = position.floor().clamp(max=TONE_KNOTS - 1)
-        index = segment.long().flatten(1)  # (B, S²)
-        low, high = knots.gather(1, index), knots.gather(1, index + 1)
-        frac = (position - segment).flatten(1)
-        return (low + (high - low) * frac).view_as(x)
+    def forward(self, x: torch.Tensor, code: torch.Tensor | None = None) -> torch.Tensor:
+        levels, targets = self.knots(x, code)  # (B, K) each, both increasing
+        flat = x.flatten(1)  # (B, S²), within [levels[:, 0], levels[:, -1]]: they are its own quantiles
+        segment = (torch.searchsorted(levels, flat.contiguous(), right=True) - 1).clamp(0, levels.shape[1] - 2)
+        low, high = levels.gather(1, segment), levels.gather(1, segment + 1)
+        frac = ((flat - low) / (high - low).clamp_min(1e-6)).clamp(0.0, 1.0)
+        out_low, out_high = targets.gather(1, segment), targets.gather(1, segment + 1)
+        return (out_low + (out_high - out_low) * frac).view_as(x)
 
 
 class Generator(nn.Module):
@@ -110,14 +130,16 @@ class Generator(nn.Module):
             nn.Conv2d(w, 1, 7, padding=3, padding_mode="reflect"),
         )
         self.residual, self.correction_scale = cfg.residual, cfg.correction_scale
-        self.tone = ToneCurve() if cfg.tone_curve else None
+        self.tone = ToneCurve(style=TONE_STYLE if cfg.tone_style else 0) if cfg.tone_curve else None
+        self.style_size = self.tone.style if self.tone is not None else 0  # entries of `code`; 0: takes none
         if self.residual:
             nn.init.zeros_(self.net[-1].weight)
             nn.init.zeros_(self.net[-1].bias)
 
-    def forward(self, render: torch.Tensor, also_toned: bool = False):
+    def forward(self, render: torch.Tensor, also_toned: bool = False, code: torch.Tensor | None = None):
         # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]; with also_toned, (that, the render after
-        # the tone curve alone): the gray-level term trains the curve, not the spatial correction
+        # the tone curve alone): the gray-level term trains the curve, not the spatial correction.
+        # code: (B, style_size) ~ N(0, 1) for the tone style; None draws one (translate passes a seeded one)
         assert render.ndim == 4 and render.shape[1] == 1 and render.shape[-1] % 4 == 0, render.shape
         if not self.residual:
             image = torch.tanh(self.net(render))
@@ -127,7 +149,7 @@ class Generator(nn.Module):
             k = self.correction_scale
             correction = F.interpolate(F.avg_pool2d(correction, k), scale_factor=k, mode="bilinear",
                                        align_corners=False)
-        toned = render if self.tone is None else self.tone(render)  # (B, 1, S, S) in [-1, 1]
+        toned = render if self.tone is None else self.tone(render, code)  # (B, 1, S, S) in [-1, 1]
         # 0.98: a black render pixel stays within reach of a gradient (tanh' = 0.04 there, not 0)
         image = torch.tanh(torch.atanh(toned.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
         return (image, toned) if also_toned else image

@@ -27,13 +27,15 @@ MULTIPLE = 4  # the generator's two stride-2 stages
 
 
 @torch.no_grad()
-def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16) -> np.ndarray:
+def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16, seed: int = 0) -> np.ndarray:
     """(N, H, W) floats in [0, 1] → (N, H, W) float32 in [0, 1].
 
     The generator sees what training showed it: each image scaled so its short side is
     the training size S, aspect kept (training centre-crops S×S windows from exactly such
     images; the fully convolutional generator takes the whole of it), reflect-padded to a
-    multiple of 4; its output is cropped back and resized to H×W.
+    multiple of 4; its output is cropped back and resized to H×W. A generator with a tone style
+    (`style_size` > 0) gets one code per image from a stream seeded by `seed`: the same call, the
+    same images.
     """
     if images01.ndim != 3:
         raise ValueError(f"expected (N, H, W) images, got shape {images01.shape}")
@@ -43,11 +45,14 @@ def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16)
     scaled = (max(size, round(h * size / min(h, w))), max(size, round(w * size / min(h, w))))
     pad_h, pad_w = -scaled[0] % MULTIPLE, -scaled[1] % MULTIPLE
     out = np.empty(images01.shape, dtype=np.float32)
+    style_size, codes = getattr(generator, "style_size", 0), torch.Generator().manual_seed(seed)
     for i in range(0, len(images01), batch):
         x = torch.from_numpy(np.ascontiguousarray(images01[i:i + batch], dtype=np.float32))[:, None]
         x = resize(x.clamp(0.0, 1.0), scaled)  # (b, 1, h', w') in [0, 1], min(h', w') == S
         x = F.pad(unit_to_signed(x), (0, pad_w, 0, pad_h), mode="reflect")  # (b, 1, h'+, w'+) in [-1, 1]
-        y = generator(x.to(device)).float().cpu()[..., :scaled[0], :scaled[1]]
+        x = x.to(device)
+        y = generator(x, code=torch.randn(len(x), style_size, generator=codes).to(device)) if style_size else generator(x)
+        y = y.float().cpu()[..., :scaled[0], :scaled[1]]
         out[i:i + batch] = resize(signed_to_unit(y), (h, w))[:, 0].numpy()
     return out
 
@@ -79,9 +84,10 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
                     chunk[path] = read_gray(path)
                 except SasmiError as e:
                     warnings.warn(f"skipping {e}", stacklevel=2)
-            for shape in {image.shape for image in chunk.values()}:
+            for k, shape in enumerate(sorted({image.shape for image in chunk.values()})):
                 group = [p for p, image in chunk.items() if image.shape == shape]
-                outputs = translate(generator, np.stack([chunk[p] for p in group]), batch)
+                # a seed of its own per group (start < len(paths)): tone-style codes differ chunk to chunk
+                outputs = translate(generator, np.stack([chunk[p] for p in group]), batch, seed=start + k * len(paths))
                 for path, image in zip(group, outputs):
                     write_gray(dst_root / path.relative_to(src_root).with_suffix(".png"), image)
                     written += 1

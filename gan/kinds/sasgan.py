@@ -53,6 +53,8 @@ class SasganRun(GanRun):
         check_number("generator.correction_scale", scale, 1, 16, integer=True, why="px")
         if self.generator.tone_curve and not self.generator.residual:
             raise SasmiError("generator.tone_curve needs generator.residual = true (the curve remaps the render)")
+        if self.generator.tone_style and not self.generator.tone_curve:
+            raise SasmiError("generator.tone_style needs generator.tone_curve = true (the code chooses the curve)")
         if scale > 1 and (not self.generator.residual or self.size % scale):
             raise SasmiError(f"generator.correction_scale = {scale}: needs generator.residual = true and a --size "
                              f"that it divides ({self.size})")
@@ -76,7 +78,7 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     renders = ImageSet(inputs["renders"], cfg.size, masks=cfg.mask_weight > 0)
     real_batches = Batches(real, cfg.batch, seed=cfg.seed)
     render_batches = Batches(renders, cfg.batch, seed=cfg.seed + 1)
-    noise, view_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4)
+    noise, view_noise, style_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4), Noise(cfg.seed + 5)
     fixed = renders.center(spread(len(renders), 8)).to(device)  # (n, 1, S, S) in [-1, 1]
     if cfg.levels_weight > 0:
         if len(real) < 2:
@@ -102,13 +104,21 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
         x, masks = render_batches.next_with_masks()  # (B, 1, S, S) in [-1, 1]; uint8 labels or None
         return x.to(device), None if masks is None else masks.to(device)
 
+    def style_code(n: int) -> torch.Tensor | None:
+        # (n, style_size) ~ N(0, 1) from the run's own stream, so that a resumed run draws the same
+        return style_noise.normal(n, generator.style_size).to(device) if generator.style_size else None
+
+    def critic_fake() -> torch.Tensor:
+        render = render_batch()[0]
+        return generator(render, code=style_code(len(render)))
+
     critic_step = critic_phase(cfg, train_critic, opt_c, lambda: real_batches.next().to(device),
-                               lambda: generator(render_batch()[0]), view, noise, device)
+                               critic_fake, view, noise, device)
 
     def generator_step() -> Logs:
         """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
         render, masks = render_batch()
-        fake, toned = train_generator(render, also_toned=True)  # (B, 1, S, S) in [-1, 1] each
+        fake, toned = train_generator(render, also_toned=True, code=style_code(len(render)))  # (B, 1, S, S) in [-1, 1] each
         adversarial = adversarial_loss(cfg, critic(view(fake)))
         with torch.no_grad():
             phi_render = encoder(render)  # (B, 1024): a target, no gradient needed
@@ -135,6 +145,8 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
 
     state = {"generator": generator, "critic": critic, "opt_g": opt_g, "opt_c": opt_c,
              "real": real_batches, "renders": render_batches, "noise": noise, "view_noise": view_noise}
+    if generator.style_size:
+        state["style_noise"] = style_noise
     if average is not None:
         state["generator_ema"] = average
     return Phases(state=state,
