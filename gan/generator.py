@@ -38,9 +38,9 @@ class GeneratorConfig:
     # pointwise curve can, without touching where anything is (docs/gan.md)
     tone_curve: bool = False
     # with `tone_curve`: the curve also reads a random code drawn per chip, so one render can take any
-    # of many gray-level distributions. Real chips' levels vary from chip to chip more than the
-    # renders' do, and a curve fixed by the render can only spread them as much as the renders
-    # spread; the gray-level term, an energy distance between sets, rewards the real spread (docs/gan.md)
+    # of many gray-level distributions, as a random real chip's histogram given to each render does
+    # (docs/gan.md, *What tells the renders from real chips*); without it the levels are a function
+    # of the render's. The gray-level term, an energy distance between sets, rewards the real spread
     tone_style: bool = False
 
 
@@ -136,14 +136,15 @@ class Generator(nn.Module):
             nn.init.zeros_(self.net[-1].weight)
             nn.init.zeros_(self.net[-1].bias)
 
-    def forward(self, render: torch.Tensor, also_toned: bool = False, code: torch.Tensor | None = None):
-        # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]; with also_toned, (that, the render after
-        # the tone curve alone): the gray-level term trains the curve, not the spatial correction.
+    def forward(self, render: torch.Tensor, also_curve_only: bool = False, code: torch.Tensor | None = None):
+        # (B, 1, S, S) in [-1, 1] → (B, 1, S, S) in [-1, 1]; with also_curve_only, (that, the same image
+        # whose gradient reaches the tone curve alone): the gray-level term judges the levels the
+        # chip ends with, and trains the curve to meet it, not the spatial correction.
         # code: (B, style_size) ~ N(0, 1) for the tone style; None draws one (translate passes a seeded one)
         assert render.ndim == 4 and render.shape[1] == 1 and render.shape[-1] % 4 == 0, render.shape
         if not self.residual:
             image = torch.tanh(self.net(render))
-            return (image, image) if also_toned else image
+            return (image, image) if also_curve_only else image
         correction = self.net(render)  # (B, 1, S, S) in atanh units
         if self.correction_scale > 1:
             k = self.correction_scale
@@ -152,7 +153,13 @@ class Generator(nn.Module):
         toned = render if self.tone is None else self.tone(render, code)  # (B, 1, S, S) in [-1, 1]
         # 0.98: a black render pixel stays within reach of a gradient (tanh' = 0.04 there, not 0)
         image = torch.tanh(torch.atanh(toned.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
-        return (image, toned) if also_toned else image
+        if not also_curve_only:
+            return image
+        # the image's values, with the gradient of the curve's output (the correction held as a
+        # constant offset, one for one): asked of the whole generator, the correction painted bright
+        # bands beside the shadows; asked of the curve's output alone, the levels that the correction
+        # then moved stayed off. Not through the tanh: where the curve reaches ±0.98 its clamp has none
+        return image, toned + (image - toned).detach()
 
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",

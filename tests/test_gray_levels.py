@@ -101,31 +101,34 @@ def data(tmp_path_factory):
     return toy_gan_inputs(tmp_path_factory.mktemp("levels"), SIZE, phi_steps=5)
 
 
-def test_gray_level_term_trains_the_tone_curve_toward_the_real_levels(data):
-    """The toy renders are a flat 0.35 floor; the real chips a skewed gamma speckle: the term must
-    bring the tone curve's output to the real levels, and leave the spatial correction alone
-    (asked of the whole image, the correction met it by painting bright bands beside shadows)."""
+def test_gray_level_term_brings_the_image_to_the_real_levels_through_the_curve_alone(data):
+    """The toy renders are a flat 0.35 floor; the real chips a skewed gamma speckle. A fixed
+    correction that brightens everything stands for what the critic asks of the spatial net. The
+    term must bring the levels the image ends with to real (the curve makes room for the
+    correction) and train the curve alone: asked of the whole generator, the correction met it by
+    painting bright bands beside the shadows; asked of the curve's output, the levels that the
+    correction then moved stayed off."""
     renders = ImageSet(data["renders"], SIZE).center(list(range(8)))
     real = ImageSet(data["real"], SIZE)
     real_levels = gray_levels(real.center(list(range(len(real)))))
-    toy = SasganRun(size=SIZE, batch=4, n_critic=1, phi_weight=0.0, critic=CriticConfig(4), lr=1e-2,
-                    generator=GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True))
-    distance = {}
-    for weight in (0.0, 10.0):
-        torch.manual_seed(0)
-        phases = SASGAN.build(replace(toy, levels_weight=weight).validate(), data, torch.device("cpu"))
-        for _ in range(40):
-            phases.generator_step()
-        with torch.no_grad():
-            toned = phases.state["generator"](renders, also_toned=True)[1]
-        distance[weight] = energy_distance(gray_levels(toned), real_levels).item()
-    start = energy_distance(gray_levels(renders), real_levels).item()
-    assert distance[10.0] < 0.2 * start and distance[10.0] < 0.2 * distance[0.0], (start, distance)
+    torch.manual_seed(0)
+    generator = Generator(GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True))
+    torch.nn.init.constant_(generator.net[-1].bias, 0.5)  # + 0.5 in atanh units everywhere
+    start = energy_distance(gray_levels(generator(renders)), real_levels).item()
+    optimiser = torch.optim.Adam(generator.tone.parameters(), lr=1e-2)
+    for _ in range(150):
+        term = energy_distance(gray_levels(generator(renders, also_curve_only=True)[1]), real_levels)
+        optimiser.zero_grad()
+        term.backward()
+        optimiser.step()
+    with torch.no_grad():
+        image, curve_only = generator(renders, also_curve_only=True)
+    torch.testing.assert_close(curve_only, image)  # the term sees the image itself
+    end = energy_distance(gray_levels(image), real_levels).item()
+    assert end < 0.1 * start, (start, end)
 
-    generator = phases.state["generator"]
     generator.zero_grad()
-    term = energy_distance(gray_levels(generator(renders, also_toned=True)[1]), real_levels)
-    term.backward()
+    energy_distance(gray_levels(generator(renders, also_curve_only=True)[1]), real_levels).backward()
     assert all(p.grad is None or not p.grad.any() for p in generator.net.parameters())
     assert any(p.grad is not None and p.grad.any() for p in generator.tone.parameters())
 

@@ -32,8 +32,8 @@ class SasganRun(GanRun):
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
     mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
     # weight of the gray-level term: the energy distance between the translations' per-chip gray-level
-    # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it is
-    # asked of the curve's output. A critic that learns from ~100 chips does not see the levels
+    # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it judges the
+    # whole image and trains the curve alone to meet it. A critic that learns from ~100 chips does not see the levels
     levels_weight: float = 0.0
 
     def validate(self) -> "SasganRun":
@@ -118,7 +118,7 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     def generator_step() -> Logs:
         """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
         render, masks = render_batch()
-        fake, toned = train_generator(render, also_toned=True, code=style_code(len(render)))  # (B, 1, S, S) in [-1, 1] each
+        fake, curve_only = train_generator(render, also_curve_only=True, code=style_code(len(render)))  # (B, 1, S, S) in [-1, 1] each
         adversarial = adversarial_loss(cfg, critic(view(fake)))
         with torch.no_grad():
             phi_render = encoder(render)  # (B, 1024): a target, no gradient needed
@@ -130,9 +130,9 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
         if cfg.levels_weight > 0:
-            # on the tone curve's output: asked of the whole image, the smooth correction met it by
-            # painting bright bands beside the shadows (docs/gan.md)
-            levels = energy_distance(gray_levels(toned if cfg.generator.tone_curve else fake), real_levels)
+            # of the whole image, through the tone curve alone: asked of all of the generator, the
+            # smooth correction met it by painting bright bands beside the shadows (docs/gan.md)
+            levels = energy_distance(gray_levels(curve_only if cfg.generator.tone_curve else fake), real_levels)
             loss = loss + cfg.levels_weight * levels
             logs["loss/levels"] = levels.item()
         opt_g.zero_grad(set_to_none=True)
