@@ -33,9 +33,9 @@ class GeneratorConfig:
     # leaves the rendered speckle, whose statistics already match real chips, as it is; 1: per pixel
     correction_scale: int = 1
     # with `residual`: first remap the render's gray levels through a monotone curve chosen per chip
-    # from the render's own histogram, its knots at the chip's quantiles, then add the smooth correction. The correction moves local
-    # levels but cannot reshape the speckle's distribution (the bright tail, the spread), which a
-    # pointwise curve can, without touching where anything is (docs/gan.md)
+    # from the render's own histogram, its knots at the chip's quantiles, then add the smooth
+    # correction. The correction moves local levels but cannot reshape the speckle's distribution
+    # (the bright tail, the spread), which a pointwise curve can, without touching where anything is
     tone_curve: bool = False
     # with `tone_curve`: the curve also reads a random code drawn per chip, so one render can take any
     # of many gray-level distributions, as a random real chip's histogram given to each render does
@@ -71,8 +71,9 @@ class ResidualBlock(nn.Module):
 
 
 # where the curve's knots sit: at these quantiles of each chip's own gray levels, its darkest and
-# brightest pixels included. Most of a SAS chip lies in the darkest quarter of the range, where
-# knots evenly spaced over [-1, 1] would leave three segments to shape nine tenths of the pixels
+# brightest pixels included. Half of a SAS chip's pixels lie below −0.68 and nine tenths below
+# −0.42 (the median chip): knots every 0.125 over [-1, 1] would leave under three segments to
+# shape the first half and five the nine tenths, and eleven for the brightest tenth
 TONE_PROBS = torch.cat([torch.tensor([0.0]), torch.linspace(0.02, 0.98, 25), torch.tensor([0.99, 0.995, 1.0])])
 TONE_STYLE = 4  # entries of the random code beside them, with `tone_style`
 

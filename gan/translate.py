@@ -51,7 +51,8 @@ def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16,
         x = resize(x.clamp(0.0, 1.0), scaled)  # (b, 1, h', w') in [0, 1], min(h', w') == S
         x = F.pad(unit_to_signed(x), (0, pad_w, 0, pad_h), mode="reflect")  # (b, 1, h'+, w'+) in [-1, 1]
         x = x.to(device)
-        y = generator(x, code=torch.randn(len(x), style_size, generator=codes).to(device)) if style_size else generator(x)
+        code = torch.randn(len(x), style_size, generator=codes).to(device) if style_size else None  # (b, style)
+        y = generator(x) if code is None else generator(x, code=code)
         y = y.float().cpu()[..., :scaled[0], :scaled[1]]
         out[i:i + batch] = resize(signed_to_unit(y), (h, w))[:, 0].numpy()
     return out

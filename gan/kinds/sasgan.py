@@ -32,8 +32,9 @@ class SasganRun(GanRun):
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
     mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
     # weight of the gray-level term: the energy distance between the translations' per-chip gray-level
-    # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it judges the
-    # whole image and trains the curve alone to meet it. A critic that learns from ~100 chips does not see the levels
+    # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it
+    # judges the whole image and trains the curve alone to meet it. A critic that learns from ~100
+    # chips does not see the levels
     levels_weight: float = 0.0
 
     def validate(self) -> "SasganRun":
@@ -118,7 +119,8 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     def generator_step() -> Logs:
         """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
         render, masks = render_batch()
-        fake, curve_only = train_generator(render, also_curve_only=True, code=style_code(len(render)))  # (B, 1, S, S) in [-1, 1] each
+        # (B, 1, S, S) in [-1, 1] each: the image, and the same with its gradient to the tone curve alone
+        fake, curve_only = train_generator(render, also_curve_only=True, code=style_code(len(render)))
         adversarial = adversarial_loss(cfg, critic(view(fake)))
         with torch.no_grad():
             phi_render = encoder(render)  # (B, 1024): a target, no gradient needed
