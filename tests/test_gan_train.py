@@ -57,6 +57,15 @@ def toy_gan_inputs(root: Path, size: int, phi_steps: int) -> dict:
     return {"real": root / "real", "renders": renders, "phi": phi}
 
 
+def sasgan_straight_and_resumed(cfg: SasganRun, root: Path, data: dict) -> tuple[dict, dict]:
+    """The last checkpoint's state of a SAS GAN trained `cfg.steps` straight, and of one stopped at
+    half and resumed (cfg.checkpoint_every must divide the half)."""
+    straight = train(SASGAN, cfg, root / "straight", data, CPU).out
+    train(SASGAN, replace(cfg, steps=cfg.steps // 2), root / "resumed", data, CPU)
+    resumed = train(SASGAN, cfg, root / "resumed", data, CPU, resume=True).out
+    return tuple(torch.load(out / "checkpoints" / "last.pt", weights_only=True)["state"] for out in (straight, resumed))
+
+
 def make_render_set(folder: Path, n: int = 6, size: int = 48, seed: int = 0) -> Path:
     """A render set as `sasmi render` writes it: seafloor, a bright target, its shadow to the right."""
     rng = np.random.default_rng(seed)

@@ -1,5 +1,4 @@
 """The critic on φ's feature maps (CriticConfig.phi_features): it learns, φ stays frozen, runs resume."""
-from dataclasses import replace
 
 import pytest
 import torch
@@ -10,9 +9,8 @@ from sasmi.gan.critic import CriticConfig, PhiCritic, make_critic
 from sasmi.gan.generator import GeneratorConfig
 from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
 from sasmi.gan.kinds.dcgan import DcganRun
-from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
-from sasmi.gan.loop import train
-from test_gan_train import toy_gan_inputs
+from sasmi.gan.kinds.sasgan import SasganRun
+from test_gan_train import sasgan_straight_and_resumed, toy_gan_inputs
 
 CPU = torch.device("cpu")
 SIZE = 32
@@ -56,14 +54,7 @@ def test_a_sasgan_with_the_phi_critic_trains_and_resumes_exactly(tmp_path):
     data = toy_gan_inputs(tmp_path / "data", SIZE, phi_steps=5)
     cfg = SasganRun(size=SIZE, batch=2, n_critic=1, steps=4, generator=GeneratorConfig(4, 1), critic=PHI_CRITIC,
                     sample_every=100, checkpoint_every=2, ema=0.0)
-    straight = train(SASGAN, cfg, tmp_path / "straight", data, CPU).out
-    train(SASGAN, replace(cfg, steps=2), tmp_path / "resumed", data, CPU)
-    resumed = train(SASGAN, cfg, tmp_path / "resumed", data, CPU, resume=True).out
-
-    def weights(out):
-        return torch.load(out / "checkpoints" / "last.pt", weights_only=True)["state"]["critic"]
-
-    a, b = weights(straight), weights(resumed)
+    a, b = (state["critic"] for state in sasgan_straight_and_resumed(cfg, tmp_path, data))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 

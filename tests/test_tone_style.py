@@ -1,8 +1,6 @@
 """The tone style: a random code per chip beside the render's gray levels chooses its tone curve,
-so that the translations can spread over gray levels as much as real chips do (not only as much
-as the renders do); translation draws the codes from a seeded stream."""
-from dataclasses import replace
-
+so that one render can take any of many gray-level distributions instead of one fixed by the
+render; training draws the codes from the run's resumable stream, translation from a seeded one."""
 import numpy as np
 import pytest
 import torch
@@ -10,14 +8,12 @@ import torch
 from sasmi.errors import SasmiError
 from sasmi.gan.critic import CriticConfig
 from sasmi.gan.generator import TONE_STYLE, Generator, GeneratorConfig, ToneCurve
-from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
-from sasmi.gan.loop import train
+from sasmi.gan.kinds.sasgan import SasganRun
 from sasmi.gan.losses import energy_distance, gray_levels
 from sasmi.gan.translate import translate_folder
 from sasmi.images import read_gray
-from test_gan_train import make_render_set, toy_gan_inputs
+from test_gan_train import make_render_set, sasgan_straight_and_resumed, toy_gan_inputs
 
-CPU = torch.device("cpu")
 STYLED = GeneratorConfig(4, 1, residual=True, correction_scale=4, tone_curve=True, tone_style=True)
 
 
@@ -95,13 +91,6 @@ def test_a_styled_sasgan_trains_and_resumes_exactly(tmp_path):
     data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
     cfg = SasganRun(size=32, batch=2, n_critic=1, steps=4, generator=STYLED, critic=CriticConfig(4), levels_weight=1.0,
                     sample_every=100, checkpoint_every=2, ema=0.0)
-    straight = train(SASGAN, cfg, tmp_path / "straight", data, CPU).out
-    train(SASGAN, replace(cfg, steps=2), tmp_path / "resumed", data, CPU)
-    resumed = train(SASGAN, cfg, tmp_path / "resumed", data, CPU, resume=True).out
-
-    def weights(out):
-        return torch.load(out / "checkpoints" / "last.pt", weights_only=True)["state"]["generator"]
-
-    a, b = weights(straight), weights(resumed)
+    a, b = (state["generator"] for state in sasgan_straight_and_resumed(cfg, tmp_path, data))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     assert any(k.startswith("tone.") and a[k].any() for k in a if k.endswith("weight"))  # the curve trained
