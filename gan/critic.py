@@ -26,6 +26,10 @@ class CriticConfig:
     # al. 2021): φ learnt what real chips look like from every real chip, seafloor included, so the
     # critic's ~100 target chips train small heads on top of it, not a whole net (SAS GAN only)
     phi_features: bool = False
+    # judge each chip standardised (its pixels' mean 0, standard deviation 1): its overall level and
+    # contrast are left to the gray-level term. Learning from ~100 chips, the critic pulled the
+    # levels away from real while the term pulled them back, through the same curve (docs/gan.md)
+    standardise: bool = False
 
 
 CRITIC_NETS = {"small": CriticConfig(32), "paper": CriticConfig(64)}
@@ -43,11 +47,13 @@ class Critic(nn.Module):
         self.features = nn.Sequential(*layers)
         self.patch = cfg.patch
         self.score = nn.Conv2d(8 * w, 1, 1) if cfg.patch else nn.Linear(8 * w * (size // 16) ** 2, 1)
-        self.size = size
+        self.size, self.standardise = size, cfg.standardise
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         # (B, 1, S, S) in [-1, 1] → (B,) unbounded scores
         assert x.shape[1:] == (1, self.size, self.size), x.shape
+        if self.standardise:  # (B, 1, S, S), each chip mean 0, std 1 (the floor: a flat chip stays finite)
+            x = (x - x.mean(dim=(1, 2, 3), keepdim=True)) / x.std(dim=(1, 2, 3), keepdim=True).clamp_min(1e-3)
         features = self.features(x)  # (B, 8w, S/16, S/16)
         if self.patch:
             return self.score(features).mean(dim=(1, 2, 3))

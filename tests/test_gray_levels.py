@@ -154,3 +154,24 @@ def test_energy_distance_in_row_blocks_equals_the_whole_matrix(monkeypatch):
     whole = energy_distance(x, y)
     monkeypatch.setattr(losses, "DISTANCE_ROWS", 3)
     assert energy_distance(x, y).item() == pytest.approx(whole.item(), abs=1e-5)
+
+
+def test_a_standardised_critic_does_not_see_a_chips_level_or_contrast():
+    """[critic] standardise leaves the overall level and contrast to the gray-level term: the
+    same picture at another level and contrast scores the same; the picture itself still counts."""
+    from sasmi.gan.critic import Critic
+
+    x = _chips([-0.5, 0.1], size=SIZE)
+    torch.manual_seed(0)
+    blind = Critic(CriticConfig(4, standardise=True), SIZE)
+    torch.testing.assert_close(blind(0.5 * x + 0.2), blind(x), atol=1e-5, rtol=1e-4)
+    assert (blind(x.flip(-1)) - blind(x)).abs().min() > 1e-4  # what is where still matters
+    seeing = Critic(CriticConfig(4), SIZE)
+    seeing.load_state_dict(blind.state_dict())
+    assert (seeing(0.5 * x + 0.2) - seeing(x)).abs().min() > 1e-4
+
+    flat = torch.zeros(1, 1, SIZE, SIZE, requires_grad=True)  # a flat chip: the penalty's gradient stays finite
+    blind(flat).sum().backward()
+    assert torch.isfinite(flat.grad).all()
+    with pytest.raises(SasmiError, match="standardise"):
+        SasganRun(critic=CriticConfig(phi_features=True, standardise=True)).validate()

@@ -42,6 +42,8 @@ class GanRun(RunConfig):
         check_number("--r1-gamma", self.r1_gamma, 0.0, 1e4)
         if self.critic.phi_features and self.critic.patch:
             raise SasmiError("critic.phi_features and critic.patch: choose one (the φ critic's heads see whole maps)")
+        if self.critic.phi_features and self.critic.standardise:
+            raise SasmiError("critic.phi_features and critic.standardise: choose one (φ reads chips in [-1, 1])")
         a = self.augment
         check_number("augment.translation", a.translation, 0.0, 0.5)
         check_number("augment.cutout", a.cutout, 0.0, 1.0)
