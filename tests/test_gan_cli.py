@@ -76,4 +76,5 @@ def test_net_flag_picks_network_sizes(tmp_path, images):
     assert main(["train", "dcgan", "--real", str(images), "--out", str(out), "--size", "32", "--batch", "2",
                  "--steps", "1", "--n-critic", "1", "--net", "paper", "--device", "cpu"]) == 0
     config = torch.load(out / "checkpoints" / "last.pt", weights_only=True)["config"]
-    assert config["critic"] == {"width": 64, "patch": False, "phi_features": False} and config["dcgan"]["width"] == 64
+    assert config["critic"] == {"width": 64, "patch": False, "phi_features": False, "standardise": False}
+    assert config["dcgan"]["width"] == 64
