@@ -12,6 +12,7 @@ import shutil
 import warnings
 from dataclasses import replace
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import torch
@@ -27,15 +28,16 @@ MULTIPLE = 4  # the generator's two stride-2 stages
 
 
 @torch.no_grad()
-def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16, seed: int = 0) -> np.ndarray:
+def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16,
+              seeds: Sequence[int] | None = None) -> np.ndarray:
     """(N, H, W) floats in [0, 1] → (N, H, W) float32 in [0, 1].
 
     The generator sees what training showed it: each image scaled so its short side is
     the training size S, aspect kept (training centre-crops S×S windows from exactly such
     images; the fully convolutional generator takes the whole of it), reflect-padded to a
     multiple of 4; its output is cropped back and resized to H×W. A generator with a tone style
-    (`style_size` > 0) gets one code per image from a stream seeded by `seed`: the same call, the
-    same images.
+    (`style_size` > 0) gets one code per image, drawn from a stream seeded by the image's entry of
+    `seeds` (default 0, 1, 2, …): one seed, one code, however the images are batched.
     """
     if images01.ndim != 3:
         raise ValueError(f"expected (N, H, W) images, got shape {images01.shape}")
@@ -45,14 +47,20 @@ def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16,
     scaled = (max(size, round(h * size / min(h, w))), max(size, round(w * size / min(h, w))))
     pad_h, pad_w = -scaled[0] % MULTIPLE, -scaled[1] % MULTIPLE
     out = np.empty(images01.shape, dtype=np.float32)
-    style_size, codes = getattr(generator, "style_size", 0), torch.Generator().manual_seed(seed)
+    style_size = getattr(generator, "style_size", 0)
+    seeds = range(len(images01)) if seeds is None else seeds
+    assert len(seeds) == len(images01), (len(seeds), len(images01))
     for i in range(0, len(images01), batch):
         x = torch.from_numpy(np.ascontiguousarray(images01[i:i + batch], dtype=np.float32))[:, None]
         x = resize(x.clamp(0.0, 1.0), scaled)  # (b, 1, h', w') in [0, 1], min(h', w') == S
         x = F.pad(unit_to_signed(x), (0, pad_w, 0, pad_h), mode="reflect")  # (b, 1, h'+, w'+) in [-1, 1]
         x = x.to(device)
-        code = torch.randn(len(x), style_size, generator=codes).to(device) if style_size else None  # (b, style)
-        y = generator(x) if code is None else generator(x, code=code)
+        if style_size:
+            code = torch.stack([torch.randn(style_size, generator=torch.Generator().manual_seed(int(seed)))
+                                for seed in seeds[i:i + batch]])  # (b, style)
+            y = generator(x, code=code.to(device))
+        else:
+            y = generator(x)
         y = y.float().cpu()[..., :scaled[0], :scaled[1]]
         out[i:i + batch] = resize(signed_to_unit(y), (h, w))[:, 0].numpy()
     return out
@@ -75,7 +83,7 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
     src_root = in_dir / "images" if render_set else in_dir
     dst_root = out_dir / "images" if render_set else out_dir
 
-    written = 0
+    written, place = 0, {path: i for i, path in enumerate(paths)}
     with tqdm(total=len(paths), unit="img", desc="translate", dynamic_ncols=True) as bar:
         for start in range(0, len(paths), batch):
             # read a chunk; images of one shape go through the generator together
@@ -85,10 +93,11 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
                     chunk[path] = read_gray(path)
                 except SasmiError as e:
                     warnings.warn(f"skipping {e}", stacklevel=2)
-            for k, shape in enumerate(sorted({image.shape for image in chunk.values()})):
+            for shape in {image.shape for image in chunk.values()}:
                 group = [p for p, image in chunk.items() if image.shape == shape]
-                # a seed of its own per group (start < len(paths)): tone-style codes differ chunk to chunk
-                outputs = translate(generator, np.stack([chunk[p] for p in group]), batch, seed=start + k * len(paths))
+                # each file's place in the folder seeds its tone-style code
+                outputs = translate(generator, np.stack([chunk[p] for p in group]), batch,
+                                    seeds=[place[p] for p in group])
                 for path, image in zip(group, outputs):
                     write_gray(dst_root / path.relative_to(src_root).with_suffix(".png"), image)
                     written += 1

@@ -226,7 +226,8 @@ def _temp_files(out: Path) -> dict[int, list[Path]]:
     return found
 
 
-Transform = Callable[[np.ndarray], np.ndarray]  # (B, H, W) in [0, 1] -> (B, H, W) in [0, 1]
+# (B, H, W) in [0, 1] and the B chips' scene indices (the seeds of anything random) -> (B, H, W) in [0, 1]
+Transform = Callable[[np.ndarray, list[int]], np.ndarray]
 
 
 def render_set(job: RenderJob, transform: Transform | None = None, identity: dict | None = None,
@@ -266,7 +267,8 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
         try:
             while chunk := list(itertools.islice(stream, batch if transform else 1)):
                 if transform is not None:
-                    images = transform(np.stack([rendered.image for _, rendered in chunk]))  # (B, H, W) in [0, 1]
+                    images = transform(np.stack([rendered.image for _, rendered in chunk]),  # (B, H, W) in [0, 1]
+                                       [index for index, _ in chunk])
                     for (index, rendered), image in zip(chunk, images):
                         write_one(job.out, index, image, rendered, job.image_format)
                 for index, _ in chunk:

@@ -92,7 +92,9 @@ def pose_sweep_from_runs(preset: str | os.PathLike, generator_run: str | os.Path
     scene = load_preset(preset).sample(cfg.seed, 0)
     generator = load_generator(generator_run, device)
     renderer = Renderer(size=generator.image_size, spp=cfg.spp)
-    return pose_sweep(scene, renderer.render, lambda images: translate(generator, images, batch=cfg.batch),
+    # one tone-style code for every pose (when the generator has a style): the sweep varies the pose alone
+    return pose_sweep(scene, renderer.render,
+                      lambda images: translate(generator, images, batch=cfg.batch, seeds=[cfg.seed] * len(images)),
                       out_dir, cfg)
 
 
