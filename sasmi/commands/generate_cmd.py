@@ -39,8 +39,9 @@ def run(args: argparse.Namespace) -> int:
                     size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
     identity = {"generator": str(Path(args.generator).resolve()),
                 "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
-    render_set(job, transform=lambda images, indices: translate(generator, images, args.batch, seeds=indices),
-               identity=identity,
-               batch=args.batch)
+    # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
+    render_set(job, transform=lambda images, indices: translate(generator, images, args.batch,
+                                                                 seeds=[args.seed * 2 ** 32 + i for i in indices]),
+               identity=identity, batch=args.batch)
     print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}")
     return 0
