@@ -89,10 +89,11 @@ def spread(n: int, k: int) -> list[int]:
 
 
 @torch.no_grad()
-def before_after(model: torch.nn.Module, fixed: torch.Tensor) -> list[torch.Tensor]:
-    """Sample-grid rows: the fixed inputs and what the model (in eval mode) makes of them."""
+def before_after(model: torch.nn.Module, fixed: torch.Tensor, code: torch.Tensor | None = None) -> list[torch.Tensor]:
+    """Sample-grid rows: the fixed inputs and what the model (in eval mode) makes of them, with
+    `code` (len(fixed), model.style_size) where the model reads one."""
     model.eval()
-    rows = [fixed, model(fixed)]
+    rows = [fixed, model(fixed, code=code.to(fixed.device)) if getattr(model, "style_size", 0) else model(fixed)]
     model.train()
     return rows
 

@@ -56,6 +56,9 @@ class SasganRun(GanRun):
             raise SasmiError("generator.tone_curve needs generator.residual = true (the curve remaps the render)")
         if self.generator.tone_style and not self.generator.tone_curve:
             raise SasmiError("generator.tone_style needs generator.tone_curve = true (the code chooses the curve)")
+        if self.generator.donor_levels and (self.generator.tone_curve or self.levels_weight > 0):
+            raise SasmiError("generator.donor_levels gives each chip a real chip's gray levels: it replaces "
+                             "generator.tone_curve and levels_weight (turn those off)")
         if scale > 1 and (not self.generator.residual or self.size % scale):
             raise SasmiError(f"generator.correction_scale = {scale}: needs generator.residual = true and a --size "
                              f"that it divides ({self.size})")
@@ -92,6 +95,10 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
 
     # ---- models and optimisers
     generator = Generator(cfg.generator).to(device)
+    if cfg.generator.donor_levels:  # before the moving average copies it
+        generator.set_donors(real.center(list(range(len(real)))).to(device))
+    # (n, style_size) ~ N(0, 1): the sample grids' own codes, so that a run's grids compare step to step
+    fixed_code = torch.randn(len(fixed), generator.style_size, generator=torch.Generator().manual_seed(cfg.seed))
     critic = make_critic(cfg.critic, cfg.size, encoder).to(device)
     average = moving_average(generator, cfg.ema) if cfg.ema > 0 else None
     opt_g = adam(generator.parameters(), cfg.lr, cfg)
@@ -119,22 +126,23 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     def generator_step() -> Logs:
         """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
         render, masks = render_batch()
-        # (B, 1, S, S) in [-1, 1] each: the image, and the same with its gradient to the tone curve alone
-        fake, curve_only = train_generator(render, also_curve_only=True, code=style_code(len(render)))
+        drawn = train_generator(render, code=style_code(len(render)), parts=True)  # (B, 1, S, S) in [-1, 1] each
+        fake = drawn.image
         adversarial = adversarial_loss(cfg, critic(view(fake)))
         with torch.no_grad():
             phi_render = encoder(render)  # (B, 1024): a target, no gradient needed
-        constraint = phi_loss(phi_render, encoder(fake), cfg.phi_margin)
+        # content is judged before a donor's levels: those the net cannot change, and they move φ
+        constraint = phi_loss(phi_render, encoder(drawn.own_levels), cfg.phi_margin)
         loss = adversarial + cfg.phi_weight * constraint
         logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
         if masks is not None:
-            contrast = mask_contrast_loss(fake, render, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
+            contrast = mask_contrast_loss(drawn.own_levels, render, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
         if cfg.levels_weight > 0:
             # of the whole image, through the tone curve alone: asked of all of the generator, the
             # smooth correction met it by painting bright bands beside the shadows (docs/gan.md)
-            levels = energy_distance(gray_levels(curve_only if cfg.generator.tone_curve else fake), real_levels)
+            levels = energy_distance(gray_levels(drawn.curve_only), real_levels)
             loss = loss + cfg.levels_weight * levels
             logs["loss/levels"] = levels.item()
         opt_g.zero_grad(set_to_none=True)
@@ -156,7 +164,8 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
                           "renders": (str(inputs["renders"]), renders.fingerprint()),
                           "phi": (str(inputs["phi"]), file_fingerprint(Path(encoder.checkpoint)))},
                   generator_step=generator_step,
-                  samples=lambda: before_after(average.module if average is not None else generator, fixed),
+                  samples=lambda: before_after(average.module if average is not None else generator, fixed,
+                                               fixed_code),
                   score="loss/wasserstein", critic_step=critic_step, critic_steps=cfg.n_critic)
 
 

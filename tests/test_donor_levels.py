@@ -1,0 +1,93 @@
+"""Donor levels: each translated chip takes the gray-level distribution of a real chip the GAN
+learned from, drawn by its code, while every pixel keeps the rank the generator gave it; the
+real chips' levels travel in the run's checkpoint, so translation draws from the same chips."""
+import numpy as np
+import pytest
+import torch
+
+from sasmi.errors import SasmiError
+from sasmi.gan.critic import CriticConfig
+from sasmi.gan.generator import DONOR_PROBS, Generator, GeneratorConfig, donor_index, load_generator
+from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
+from sasmi.gan.translate import translate
+from sasmi.gan.loop import train
+from test_gan_train import CPU, toy_gan_inputs
+
+DONOR = GeneratorConfig(4, 1, residual=True, correction_scale=4, donor_levels=True)
+
+
+def _generator_with_donors(real: torch.Tensor) -> Generator:
+    torch.manual_seed(0)
+    generator = Generator(DONOR)
+    torch.nn.init.normal_(generator.net[-1].weight, std=0.3)  # a correction that does something
+    generator.set_donors(real)
+    return generator
+
+
+def _real(n: int = 4, size: int = 32) -> torch.Tensor:
+    """(n, 1, S, S) in [-1, 1], each chip a different distribution: dark to bright."""
+    u = torch.rand(n, 1, size, size, generator=torch.Generator().manual_seed(1))
+    return torch.stack([2 * u[i] ** (3.0 / (i + 1)) - 1 for i in range(n)])
+
+
+def test_each_chip_takes_the_chosen_real_chips_levels_and_keeps_its_ranks():
+    real = _real()
+    generator = _generator_with_donors(real)
+    renders = torch.rand(4, 1, 32, 32, generator=torch.Generator().manual_seed(2)) * 0.6 - 0.8
+    code = torch.tensor([[-2.0], [-0.3], [0.3], [2.0]])  # one per donor
+    with torch.no_grad():
+        drawn = generator(renders, code=code, parts=True)
+    assert donor_index(code[:, 0], 4).tolist() == [0, 1, 2, 3]
+    for chip, own, donor in zip(drawn.image, drawn.own_levels, real):
+        probs = torch.linspace(0, 1, 21)
+        torch.testing.assert_close(chip.flatten().quantile(probs), donor.flatten().quantile(probs), atol=0.02, rtol=0)
+        order = own.flatten().argsort()
+        assert (chip.flatten()[order].diff() >= -1e-6).all()  # brighter stays brighter
+    assert (drawn.image - drawn.own_levels).abs().max() > 0.1  # the levels did change
+
+
+def test_the_gradient_passes_straight_through_to_the_net():
+    """The net cannot change a donor's levels, only each pixel's rank: its gradient is the one
+    the chip's own values would have had."""
+    generator = _generator_with_donors(_real())
+    renders = torch.rand(2, 1, 16, 16, generator=torch.Generator().manual_seed(3)) * 0.6 - 0.8
+    code = torch.zeros(2, 1)
+    weight = torch.randn(2, 1, 16, 16)
+    (generator(renders, code=code) * weight).sum().backward()
+    through = [p.grad.clone() for p in generator.net.parameters()]
+    generator.zero_grad()
+    (generator(renders, code=code, parts=True).own_levels * weight).sum().backward()
+    assert any(g.abs().max() > 0 for g in through)
+    for a, p in zip(through, generator.net.parameters()):
+        torch.testing.assert_close(a, p.grad)
+
+
+def test_the_donors_travel_in_the_checkpoint_and_a_seed_picks_the_same_one(tmp_path):
+    data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
+    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4),
+                    sample_every=100, checkpoint_every=2)
+    run = train(SASGAN, cfg, tmp_path / "run", data, CPU).out
+    generator = load_generator(run)  # the moving average, its donors copied with it
+    assert generator.donors.shape == (8, len(DONOR_PROBS))  # the toy set's 8 real chips
+    renders = np.random.default_rng(0).random((3, 32, 32)).astype(np.float32) * 0.5
+    out = translate(generator, renders[[0, 0, 0]], seeds=[7, 7, 8])
+    np.testing.assert_array_equal(out[0], out[1])
+    levels = torch.quantile(torch.from_numpy(out * 2 - 1).flatten(1), DONOR_PROBS, dim=1).T
+    nearest = torch.cdist(levels, generator.donors).min(dim=1).values
+    assert (nearest < 0.1).all(), nearest  # each output is one of the real chips' distributions
+
+
+@pytest.mark.parametrize("other", [{"generator": GeneratorConfig(residual=True, tone_curve=True, donor_levels=True)},
+                                   {"generator": DONOR, "levels_weight": 1.0}])
+def test_donor_levels_refuse_the_other_ways_of_choosing_levels(other):
+    with pytest.raises(SasmiError, match="donor_levels"):
+        SasganRun(**other).validate()
+
+
+def test_a_runs_sample_grids_use_fixed_codes(tmp_path):
+    """Grids drawn with fresh codes would differ in gray levels from one to the next."""
+    data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
+    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4))
+    phases = SASGAN.build(cfg, data, CPU)
+    first, second = phases.samples(), phases.samples()
+    torch.testing.assert_close(first[1], second[1])
