@@ -140,7 +140,6 @@ class Drawn(NamedTuple):
     """What the generator makes of a batch, each (B, 1, S, S) in [-1, 1]."""
     image: torch.Tensor  # the chip
     curve_only: torch.Tensor  # its values, with the gradient of the tone curve's output alone
-    own_levels: torch.Tensor  # the chip before a donor's gray levels (the chip itself without them)
 
 
 class Generator(nn.Module):
@@ -205,14 +204,20 @@ class Generator(nn.Module):
             # alone, the levels that the correction then moved stayed off. Not through the tanh:
             # where the curve reaches ±0.98 its clamp has none
             curve_only = toned + (image - toned).detach()
-        own_levels = image
         if self.donor_levels:
-            assert len(self.donors), "donor_levels: set_donors first"
-            donor = self.donors[donor_index(code[:, -1], len(self.donors))].to(image)  # (B, K)
-            own = torch.quantile(image.detach().flatten(1), DONOR_PROBS.to(image), dim=1).T.contiguous()
-            # a straight-through gradient: each pixel's rank, which the net does choose, moves as its value would
-            image = image + (remap(image.detach(), own, donor) - image).detach()
-        return Drawn(image, curve_only, own_levels) if parts else image
+            # a straight-through gradient: the net chooses each pixel's rank, which moves as its value would
+            image = image + (self.at_donor_levels(image.detach(), code) - image).detach()
+        return Drawn(image, curve_only) if parts else image
+
+    def at_donor_levels(self, x: torch.Tensor, code: torch.Tensor) -> torch.Tensor:
+        """x (B, 1, S, S) in [-1, 1] with the gray levels of the donor that `code` (B, style_size)
+        chooses, each pixel keeping its rank; no gradient. The generator's chips with `donor_levels`,
+        and the render as the content terms see it: at the same levels as its translation."""
+        assert len(self.donors), "donor_levels: set_donors first"
+        with torch.no_grad():
+            donor = self.donors[donor_index(code[:, -1], len(self.donors))].to(x)  # (B, K)
+            own = torch.quantile(x.flatten(1), DONOR_PROBS.to(x), dim=1).T.contiguous()  # (B, K)
+            return remap(x, own, donor)
 
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",

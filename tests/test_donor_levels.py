@@ -1,6 +1,8 @@
 """Donor levels: each translated chip takes the gray-level distribution of a real chip the GAN
 learned from, drawn by its code, while every pixel keeps the rank the generator gave it; the
 real chips' levels travel in the run's checkpoint, so translation draws from the same chips."""
+import copy
+
 import numpy as np
 import pytest
 import torch
@@ -24,6 +26,13 @@ def _generator_with_donors(real: torch.Tensor) -> Generator:
     return generator
 
 
+def _without_donors(generator: Generator) -> Generator:
+    """The same net, its chips at their own levels."""
+    plain = copy.deepcopy(generator)
+    plain.donor_levels = False
+    return plain
+
+
 def _real(n: int = 4, size: int = 32) -> torch.Tensor:
     """(n, 1, S, S) in [-1, 1], each chip a different distribution: dark to bright."""
     u = torch.rand(n, 1, size, size, generator=torch.Generator().manual_seed(1))
@@ -36,14 +45,14 @@ def test_each_chip_takes_the_chosen_real_chips_levels_and_keeps_its_ranks():
     renders = torch.rand(4, 1, 32, 32, generator=torch.Generator().manual_seed(2)) * 0.6 - 0.8
     code = torch.tensor([[-2.0], [-0.3], [0.3], [2.0]])  # one per donor
     with torch.no_grad():
-        drawn = generator(renders, code=code, parts=True)
+        chips, own_levels = generator(renders, code=code), _without_donors(generator)(renders, code=code)
     assert donor_index(code[:, 0], 4).tolist() == [0, 1, 2, 3]
-    for chip, own, donor in zip(drawn.image, drawn.own_levels, real):
+    for chip, own, donor in zip(chips, own_levels, real):
         probs = torch.linspace(0, 1, 21)
         torch.testing.assert_close(chip.flatten().quantile(probs), donor.flatten().quantile(probs), atol=0.02, rtol=0)
         order = own.flatten().argsort()
         assert (chip.flatten()[order].diff() >= -1e-6).all()  # brighter stays brighter
-    assert (drawn.image - drawn.own_levels).abs().max() > 0.1  # the levels did change
+    assert (chips - own_levels).abs().max() > 0.1  # the levels did change
 
 
 def test_the_gradient_passes_straight_through_to_the_net():
@@ -55,10 +64,11 @@ def test_the_gradient_passes_straight_through_to_the_net():
     weight = torch.randn(2, 1, 16, 16)
     (generator(renders, code=code) * weight).sum().backward()
     through = [p.grad.clone() for p in generator.net.parameters()]
-    generator.zero_grad()
-    (generator(renders, code=code, parts=True).own_levels * weight).sum().backward()
+    plain = _without_donors(generator)
+    plain.zero_grad()
+    (plain(renders, code=code) * weight).sum().backward()
     assert any(g.abs().max() > 0 for g in through)
-    for a, p in zip(through, generator.net.parameters()):
+    for a, p in zip(through, plain.net.parameters()):
         torch.testing.assert_close(a, p.grad)
 
 
@@ -91,3 +101,13 @@ def test_a_runs_sample_grids_use_fixed_codes(tmp_path):
     phases = SASGAN.build(cfg, data, CPU)
     first, second = phases.samples(), phases.samples()
     torch.testing.assert_close(first[1], second[1])
+
+
+def test_the_content_terms_compare_the_chip_with_the_render_at_the_same_donors_levels(tmp_path):
+    """At the first step the residual generator gives back the render at a donor's levels: the φ
+    and mask terms must see no change (against the render itself, the levels alone would count)."""
+    data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
+    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4),
+                    phi_margin=0.0, mask_weight=1.0, mask_keep=1.0)
+    logs = SASGAN.build(cfg, data, CPU).generator_step()
+    assert logs["loss/phi"] < 1e-6 and logs["loss/mask"] < 1e-6, logs

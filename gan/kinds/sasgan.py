@@ -126,17 +126,20 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
     def generator_step() -> Logs:
         """Fool the critic while φ(G(render)) stays within γ of φ(render) and the mask contrasts stay."""
         render, masks = render_batch()
-        drawn = train_generator(render, code=style_code(len(render)), parts=True)  # (B, 1, S, S) in [-1, 1] each
+        code = style_code(len(render))
+        drawn = train_generator(render, code=code, parts=True)  # (B, 1, S, S) in [-1, 1] each
         fake = drawn.image
         adversarial = adversarial_loss(cfg, critic(view(fake)))
+        # what the content terms compare the chip with: the render itself, or, with donor levels, the
+        # render given the same donor's levels (the levels the net cannot change; they move φ)
+        reference = generator.at_donor_levels(render, code) if cfg.generator.donor_levels else render
         with torch.no_grad():
-            phi_render = encoder(render)  # (B, 1024): a target, no gradient needed
-        # content is judged before a donor's levels: those the net cannot change, and they move φ
-        constraint = phi_loss(phi_render, encoder(drawn.own_levels), cfg.phi_margin)
+            phi_render = encoder(reference)  # (B, 1024): a target, no gradient needed
+        constraint = phi_loss(phi_render, encoder(fake), cfg.phi_margin)
         loss = adversarial + cfg.phi_weight * constraint
         logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
         if masks is not None:
-            contrast = mask_contrast_loss(drawn.own_levels, render, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
+            contrast = mask_contrast_loss(fake, reference, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
         if cfg.levels_weight > 0:
