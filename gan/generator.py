@@ -140,6 +140,7 @@ class Drawn(NamedTuple):
     """What the generator makes of a batch, each (B, 1, S, S) in [-1, 1]."""
     image: torch.Tensor  # the chip
     curve_only: torch.Tensor  # its values, with the gradient of the tone curve's output alone
+    own_levels: torch.Tensor  # the chip at the net's own levels, before a donor's (the chip, without donors)
 
 
 class Generator(nn.Module):
@@ -204,10 +205,11 @@ class Generator(nn.Module):
             # alone, the levels that the correction then moved stayed off. Not through the tanh:
             # where the curve reaches ±0.98 its clamp has none
             curve_only = toned + (image - toned).detach()
+        own_levels = image
         if self.donor_levels:
             # a straight-through gradient: the net chooses each pixel's rank, which moves as its value would
             image = image + (self.at_donor_levels(image.detach(), code) - image).detach()
-        return Drawn(image, curve_only) if parts else image
+        return Drawn(image, curve_only, own_levels) if parts else image
 
     def at_donor_levels(self, x: torch.Tensor, code: torch.Tensor) -> torch.Tensor:
         """x (B, 1, S, S) in [-1, 1] with the gray levels of the donor that `code` (B, style_size)

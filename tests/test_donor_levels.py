@@ -111,3 +111,18 @@ def test_the_content_terms_compare_the_chip_with_the_render_at_the_same_donors_l
                     phi_margin=0.0, mask_weight=1.0, mask_keep=1.0)
     logs = SASGAN.build(cfg, data, CPU).generator_step()
     assert logs["loss/phi"] < 1e-6 and logs["loss/mask"] < 1e-6, logs
+
+
+def test_the_nets_own_levels_are_held_at_the_renders(tmp_path):
+    """The donor's levels replace the net's own, so nothing else holds those: left free, they ran
+    to ±1 and every chip became one flat gray after the matching. An anchor holds them."""
+    data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
+    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4), lr=0.1)
+    phases = SASGAN.build(cfg, data, CPU)
+    generator = phases.state["generator"]
+    assert phases.generator_step()["loss/anchor"] < 1e-6  # the render itself at first
+    torch.nn.init.constant_(generator.net[-1].bias, 1.0)  # + 1 in atanh units everywhere
+    first = phases.generator_step()["loss/anchor"]
+    for _ in range(15):
+        last = phases.generator_step()["loss/anchor"]
+    assert first > 0.1 and last < 0.5 * first, (first, last)

@@ -65,6 +65,9 @@ class SasganRun(GanRun):
         return self
 
 
+DONOR_ANCHOR = 10.0  # weight of the anchor of the net's own levels with donor levels; as the mask term's
+
+
 def moving_average(generator: Generator, decay: float) -> AveragedModel:
     """An exponential moving average of the generator's weights, its decay ramped up as
     (1 + n)/(10 + n) over the first updates so that the random initialisation fades fast."""
@@ -142,6 +145,13 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
             contrast = mask_contrast_loss(fake, reference, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
+        if cfg.generator.donor_levels:
+            # the net's own levels, which the donor's replace, held at the render's: nothing else
+            # holds them, and, left free, the straight-through gradient drove them to ±1 (ties, one
+            # flat gray chip after the matching, in 600 steps). The net keeps choosing the ranks
+            anchor = (gray_levels(drawn.own_levels) - gray_levels(render)).abs().mean()
+            loss = loss + DONOR_ANCHOR * anchor
+            logs["loss/anchor"] = anchor.item()
         if cfg.levels_weight > 0:
             # of the whole image, through the tone curve alone: asked of all of the generator, the
             # smooth correction met it by painting bright bands beside the shadows (docs/gan.md)
