@@ -136,6 +136,27 @@ def donor_index(code: torch.Tensor, donors: int) -> torch.Tensor:
     return (uniform * donors).long().clamp(0, donors - 1)
 
 
+class _RanksOnly(torch.autograd.Function):
+    """Forward: the chip at a donor's levels. Backward: straight through to the chip at its own
+    levels, less what would change its mean or its contrast: those the donor's levels replace, and
+    passed on they added up, step after step, until the net's own levels sat at ±1 (ties: one flat
+    gray chip after the matching). What is left moves pixels' ranks: which are bright, which dark."""
+
+    @staticmethod
+    def forward(ctx, own: torch.Tensor, matched: torch.Tensor) -> torch.Tensor:  # (B, 1, S, S) each
+        ctx.save_for_backward(own)
+        return matched.clone()
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        (own,) = ctx.saved_tensors
+        dims = tuple(range(1, own.ndim))
+        centred = own - own.mean(dim=dims, keepdim=True)
+        grad = grad - grad.mean(dim=dims, keepdim=True)
+        spread = (centred * centred).sum(dim=dims, keepdim=True).clamp_min(1e-12)
+        return grad - (grad * centred).sum(dim=dims, keepdim=True) / spread * centred, None
+
+
 class Drawn(NamedTuple):
     """What the generator makes of a batch, each (B, 1, S, S) in [-1, 1]."""
     image: torch.Tensor  # the chip
@@ -207,8 +228,7 @@ class Generator(nn.Module):
             curve_only = toned + (image - toned).detach()
         own_levels = image
         if self.donor_levels:
-            # a straight-through gradient: the net chooses each pixel's rank, which moves as its value would
-            image = image + (self.at_donor_levels(image.detach(), code) - image).detach()
+            image = _RanksOnly.apply(image, self.at_donor_levels(image.detach(), code))
         return Drawn(image, curve_only, own_levels) if parts else image
 
     def at_donor_levels(self, x: torch.Tensor, code: torch.Tensor) -> torch.Tensor:

@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 import torch
 
+import sasmi.gan.kinds.sasgan
+
 from sasmi.errors import SasmiError
 from sasmi.gan.critic import CriticConfig
-from sasmi.gan.generator import DONOR_PROBS, Generator, GeneratorConfig, donor_index, load_generator
+from sasmi.gan.generator import DONOR_PROBS, _RanksOnly, Generator, GeneratorConfig, donor_index, load_generator
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.translate import translate
 from sasmi.gan.loop import train
@@ -55,21 +57,22 @@ def test_each_chip_takes_the_chosen_real_chips_levels_and_keeps_its_ranks():
     assert (chips - own_levels).abs().max() > 0.1  # the levels did change
 
 
-def test_the_gradient_passes_straight_through_to_the_net():
-    """The net cannot change a donor's levels, only each pixel's rank: its gradient is the one
-    the chip's own values would have had."""
+def test_the_gradient_moves_ranks_only():
+    """The net cannot change a donor's levels, only each pixel's rank: the gradient passes straight
+    through the matching, less its parts along a shift or a stretch of the chip's own levels, which
+    keep every rank (left in, those added up until the net's own levels sat at ±1 and the chips
+    went flat)."""
     generator = _generator_with_donors(_real())
-    renders = torch.rand(2, 1, 16, 16, generator=torch.Generator().manual_seed(3)) * 0.6 - 0.8
+    renders = torch.rand(2, 1, 32, 32, generator=torch.Generator().manual_seed(3)) * 0.6 - 0.8
     code = torch.zeros(2, 1)
-    weight = torch.randn(2, 1, 16, 16)
-    (generator(renders, code=code) * weight).sum().backward()
-    through = [p.grad.clone() for p in generator.net.parameters()]
-    plain = _without_donors(generator)
-    plain.zero_grad()
-    (plain(renders, code=code) * weight).sum().backward()
-    assert any(g.abs().max() > 0 for g in through)
-    for a, p in zip(through, plain.net.parameters()):
-        torch.testing.assert_close(a, p.grad)
+    own = _without_donors(generator)(renders, code=code).detach().requires_grad_(True)
+    matched = _RanksOnly.apply(own, generator.at_donor_levels(own.detach(), code))
+    torch.testing.assert_close(matched, generator(renders, code=code))
+    (matched * torch.randn(2, 1, 32, 32)).sum().backward()
+    centred = own.detach() - own.detach().mean(dim=(1, 2, 3), keepdim=True)
+    assert own.grad.sum(dim=(1, 2, 3)).abs().max() < 1e-4  # no shift
+    assert (own.grad * centred).sum(dim=(1, 2, 3)).abs().max() < 1e-4  # no stretch
+    assert own.grad.abs().mean() > 0.5  # the rest passes
 
 
 def test_the_donors_travel_in_the_checkpoint_and_a_seed_picks_the_same_one(tmp_path):
@@ -113,16 +116,21 @@ def test_the_content_terms_compare_the_chip_with_the_render_at_the_same_donors_l
     assert logs["loss/phi"] < 1e-6 and logs["loss/mask"] < 1e-6, logs
 
 
-def test_the_nets_own_levels_are_held_at_the_renders(tmp_path):
-    """The donor's levels replace the net's own, so nothing else holds those: left free, they ran
-    to ±1 and every chip became one flat gray after the matching. An anchor holds them."""
+def test_the_nets_own_levels_are_held_at_the_renders(tmp_path, monkeypatch):
+    """The donor's levels replace the net's own, so nothing else holds those: an anchor does."""
     data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
-    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4), lr=0.1)
-    phases = SASGAN.build(cfg, data, CPU)
-    generator = phases.state["generator"]
-    assert phases.generator_step()["loss/anchor"] < 1e-6  # the render itself at first
-    torch.nn.init.constant_(generator.net[-1].bias, 1.0)  # + 1 in atanh units everywhere
-    first = phases.generator_step()["loss/anchor"]
-    for _ in range(15):
-        last = phases.generator_step()["loss/anchor"]
-    assert first > 0.1 and last < 0.5 * first, (first, last)
+    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4), lr=0.05)
+
+    def anchor_after_a_push(weight: float) -> tuple[float, float]:
+        monkeypatch.setattr(sasmi.gan.kinds.sasgan, "DONOR_ANCHOR", weight)
+        torch.manual_seed(0)
+        phases = SASGAN.build(cfg, data, CPU)
+        assert phases.generator_step()["loss/anchor"] < 1e-6  # the render itself at first
+        torch.nn.init.constant_(phases.state["generator"].net[-1].bias, 1.0)  # + 1 in atanh units everywhere
+        first = phases.generator_step()["loss/anchor"]
+        for _ in range(30):
+            last = phases.generator_step()["loss/anchor"]
+        return first, last
+
+    (first, held), (_, free) = anchor_after_a_push(10.0), anchor_after_a_push(0.0)
+    assert first > 0.1 and held < 0.5 * free, (first, held, free)
