@@ -48,6 +48,10 @@ class GeneratorConfig:
     # where things are bright or dark, and the critic, seeing real levels on both sides, judges that
     # arrangement. Random real histograms alone take renders 1.53 → 1.36 in φ-FID (docs/gan.md)
     donor_levels: bool = False
+    # the same match in translation only: the GAN trains as without it (its critic never sees the
+    # donors' levels), and each chip it translates then takes one. Measured better than learning it
+    # (docs/gan.md, *Donor levels*)
+    donor_levels_after: bool = False
 
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
@@ -179,13 +183,14 @@ class Generator(nn.Module):
         )
         self.residual, self.correction_scale = cfg.residual, cfg.correction_scale
         self.tone = ToneCurve(style=TONE_STYLE if cfg.tone_style else 0) if cfg.tone_curve else None
-        self.donor_levels = cfg.donor_levels
+        self.donor_levels, self.donor_levels_after = cfg.donor_levels, cfg.donor_levels_after
+        donors = cfg.donor_levels or cfg.donor_levels_after
         # (N, len(DONOR_PROBS)): each real chip's levels; filled by `set_donors` when training starts,
         # then kept in the checkpoint with the weights, so translation draws from the same chips
         # (not in the checkpoints of runs without donors, which then load as before)
-        self.register_buffer("donors", torch.empty(0, len(DONOR_PROBS)), persistent=cfg.donor_levels)
+        self.register_buffer("donors", torch.empty(0, len(DONOR_PROBS)), persistent=donors)
         # entries of `code`: the tone style's, then the donor's; 0: takes none
-        self.style_size = (self.tone.style if self.tone is not None else 0) + int(cfg.donor_levels)
+        self.style_size = (self.tone.style if self.tone is not None else 0) + int(donors)
         if self.residual:
             nn.init.zeros_(self.net[-1].weight)
             nn.init.zeros_(self.net[-1].bias)
@@ -227,7 +232,7 @@ class Generator(nn.Module):
             # where the curve reaches ±0.98 its clamp has none
             curve_only = toned + (image - toned).detach()
         own_levels = image
-        if self.donor_levels:
+        if self.donor_levels or (self.donor_levels_after and not self.training):
             image = _RanksOnly.apply(image, self.at_donor_levels(image.detach(), code))
         return Drawn(image, curve_only, own_levels) if parts else image
 

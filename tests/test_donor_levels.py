@@ -2,6 +2,7 @@
 learned from, drawn by its code, while every pixel keeps the rank the generator gave it; the
 real chips' levels travel in the run's checkpoint, so translation draws from the same chips."""
 import copy
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from sasmi.gan.loop import train
 from test_gan_train import CPU, toy_gan_inputs
 
 DONOR = GeneratorConfig(4, 1, residual=True, correction_scale=4, donor_levels=True)
+AFTER = GeneratorConfig(4, 1, residual=True, correction_scale=4, donor_levels_after=True)
 
 
 def _generator_with_donors(real: torch.Tensor) -> Generator:
@@ -75,9 +77,10 @@ def test_the_gradient_moves_ranks_only():
     assert own.grad.abs().mean() > 0.5  # the rest passes
 
 
-def test_the_donors_travel_in_the_checkpoint_and_a_seed_picks_the_same_one(tmp_path):
+@pytest.mark.parametrize("generator_cfg", [DONOR, AFTER])
+def test_the_donors_travel_in_the_checkpoint_and_a_seed_picks_the_same_one(tmp_path, generator_cfg):
     data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
-    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=DONOR, critic=CriticConfig(4),
+    cfg = SasganRun(size=32, batch=2, n_critic=1, steps=2, generator=generator_cfg, critic=CriticConfig(4),
                     sample_every=100, checkpoint_every=2)
     run = train(SASGAN, cfg, tmp_path / "run", data, CPU).out
     generator = load_generator(run)  # the moving average, its donors copied with it
@@ -91,7 +94,9 @@ def test_the_donors_travel_in_the_checkpoint_and_a_seed_picks_the_same_one(tmp_p
 
 
 @pytest.mark.parametrize("other", [{"generator": GeneratorConfig(residual=True, tone_curve=True, donor_levels=True)},
-                                   {"generator": DONOR, "levels_weight": 1.0}])
+                                   {"generator": DONOR, "levels_weight": 1.0},
+                                   {"generator": GeneratorConfig(residual=True, donor_levels=True,
+                                                                 donor_levels_after=True)}])
 def test_donor_levels_refuse_the_other_ways_of_choosing_levels(other):
     with pytest.raises(SasmiError, match="donor_levels"):
         SasganRun(**other).validate()
@@ -134,3 +139,35 @@ def test_the_nets_own_levels_are_held_at_the_renders(tmp_path, monkeypatch):
 
     (first, held), (_, free) = anchor_after_a_push(10.0), anchor_after_a_push(0.0)
     assert first > 0.1 and held < 0.5 * free, (first, held, free)
+
+
+def test_after_the_critic_sees_the_nets_own_levels_and_translation_a_donors():
+    """`donor_levels_after`: the GAN trains as without donors; in eval mode (translation, the
+    sample grids) each chip takes a donor's levels."""
+    real = _real()
+    torch.manual_seed(0)
+    generator = Generator(AFTER)
+    torch.nn.init.normal_(generator.net[-1].weight, std=0.3)
+    generator.set_donors(real)
+    plain = Generator(GeneratorConfig(4, 1, residual=True, correction_scale=4))
+    plain.load_state_dict({k: v for k, v in generator.state_dict().items() if k != "donors"})
+    renders = torch.rand(4, 1, 32, 32, generator=torch.Generator().manual_seed(2)) * 0.6 - 0.8
+    code = torch.tensor([[-2.0], [-0.3], [0.3], [2.0]])
+    with torch.no_grad():
+        torch.testing.assert_close(generator.train()(renders, code=code), plain(renders))
+        translated = generator.eval()(renders, code=code)
+    probs = torch.linspace(0, 1, 21)
+    for chip, donor in zip(translated, real):
+        torch.testing.assert_close(chip.flatten().quantile(probs), donor.flatten().quantile(probs), atol=0.02, rtol=0)
+
+
+def test_after_trains_the_very_same_generator(tmp_path):
+    """The donors' levels come after training: the weights are those of the same run without them."""
+    data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
+    base = SasganRun(size=32, batch=2, n_critic=1, steps=3, critic=CriticConfig(4), sample_every=100, checkpoint_every=3,
+                     generator=GeneratorConfig(4, 1, residual=True, correction_scale=4))
+    states = [torch.load(train(SASGAN, cfg, tmp_path / name, data, CPU).out / "checkpoints" / "last.pt",
+                         weights_only=True)["state"]["generator"]
+              for name, cfg in (("plain", base), ("after", replace(base, generator=AFTER)))]
+    assert set(states[1]) - set(states[0]) == {"donors"}
+    assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])

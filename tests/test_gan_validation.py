@@ -189,7 +189,8 @@ def test_config_travels_inside_the_checkpoint(runs):
     ckpt = torch.load(runs["gan"] / "checkpoints" / "last.pt", weights_only=True)
     assert ckpt["kind"] == "sasgan" and ckpt["config"]["generator"] == {"width": 4, "blocks": 1, "residual": False,
                                                                      "correction_scale": 1, "tone_curve": False,
-                                                                     "tone_style": False, "donor_levels": False}
+                                                                     "tone_style": False, "donor_levels": False,
+                                                                     "donor_levels_after": False}
     assert set(ckpt["inputs"]) == {"real", "renders", "phi"}
     assert pickle.loads(pickle.dumps(ckpt["config"])) == ckpt["config"]  # plain types only
 
