@@ -15,6 +15,7 @@ from sasmi.gan.critic import CriticConfig
 from sasmi.gan.generator import DONOR_PROBS, _RanksOnly, Generator, GeneratorConfig, donor_index, load_generator
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.translate import translate
+from sasmi.pipeline import sasgan_settings
 from sasmi.gan.loop import train
 from test_gan_train import CPU, toy_gan_inputs
 
@@ -171,3 +172,10 @@ def test_after_trains_the_very_same_generator(tmp_path):
               for name, cfg in (("plain", base), ("after", replace(base, generator=AFTER)))]
     assert set(states[1]) - set(states[0]) == {"donors"}
     assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])
+
+
+def test_the_real_levels_recipe_is_small_data_with_donors_after():
+    """Two files that must not drift apart: the only difference is the one setting."""
+    small, real = sasgan_settings("small_data"), sasgan_settings("real_levels")
+    assert real.pop("generator") == replace(small.pop("generator"), donor_levels_after=True)
+    assert real == small
