@@ -151,8 +151,9 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
             logs["loss/mask"] = contrast.item()
         if cfg.generator.donor_levels:
             # the net's own levels, which the donor's replace, held at the render's: nothing else
-            # holds them, and, left free, the straight-through gradient drove them to ±1 (ties, one
-            # flat gray chip after the matching, in 600 steps). The net keeps choosing the ranks
+            # holds them. The plain straight-through gradient drove them to ±1 (ties: one flat gray
+            # chip after the matching, in 600 steps), with this anchor too; `_RanksOnly` removes
+            # that push, and this keeps slower drifts in check. The net keeps choosing the ranks
             anchor = (gray_levels(drawn.own_levels) - gray_levels(render)).abs().mean()
             loss = loss + DONOR_ANCHOR * anchor
             logs["loss/anchor"] = anchor.item()
