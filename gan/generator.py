@@ -133,6 +133,11 @@ class ToneCurve(nn.Module):
         return remap(x, *self.knots(x, code))  # the knots are x's own quantiles: x lies within them
 
 
+def _donor_quantiles(x: torch.Tensor) -> torch.Tensor:
+    """Each image's gray levels at DONOR_PROBS: (B, 1, S, S) → (B, K)."""
+    return torch.quantile(x.flatten(1), DONOR_PROBS.to(x), dim=1).T.contiguous()
+
+
 def donor_index(code: torch.Tensor, donors: int) -> torch.Tensor:
     """Which of `donors` real chips gives each image its levels: code (B,) ~ N(0, 1) → (B,) int,
     uniform over the donors (the normal's CDF)."""
@@ -197,7 +202,7 @@ class Generator(nn.Module):
 
     def set_donors(self, real: torch.Tensor) -> None:
         """Keep the gray levels of real chips (N, 1, S, S) in [-1, 1] for `donor_levels`."""
-        self.donors = torch.quantile(real.flatten(1).float(), DONOR_PROBS, dim=1).T.contiguous().to(self.donors)
+        self.donors = _donor_quantiles(real.float()).to(self.donors)
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         saved = state_dict.get(prefix + "donors")
@@ -243,7 +248,7 @@ class Generator(nn.Module):
         assert len(self.donors), "donor_levels: set_donors first"
         with torch.no_grad():
             donor = self.donors[donor_index(code[:, -1], len(self.donors))].to(x)  # (B, K)
-            own = torch.quantile(x.flatten(1), DONOR_PROBS.to(x), dim=1).T.contiguous()  # (B, K)
+            own = _donor_quantiles(x)  # (B, K)
             return remap(x, own, donor)
 
 

@@ -1,7 +1,6 @@
 """Donor levels: each translated chip takes the gray-level distribution of a real chip the GAN
 learned from, drawn by its code, while every pixel keeps the rank the generator gave it; the
 real chips' levels travel in the run's checkpoint, so translation draws from the same chips."""
-import copy
 from dataclasses import replace
 
 import numpy as np
@@ -31,13 +30,6 @@ def _generator_with_donors(real: torch.Tensor) -> Generator:
     return generator
 
 
-def _without_donors(generator: Generator) -> Generator:
-    """The same net, its chips at their own levels."""
-    plain = copy.deepcopy(generator)
-    plain.donor_levels = False
-    return plain
-
-
 def _real(n: int = 4, size: int = 32) -> torch.Tensor:
     """(n, 1, S, S) in [-1, 1], each chip a different distribution: dark to bright."""
     u = torch.rand(n, 1, size, size, generator=torch.Generator().manual_seed(1))
@@ -50,7 +42,7 @@ def test_each_chip_takes_the_chosen_real_chips_levels_and_keeps_its_ranks():
     renders = torch.rand(4, 1, 32, 32, generator=torch.Generator().manual_seed(2)) * 0.6 - 0.8
     code = torch.tensor([[-2.0], [-0.3], [0.3], [2.0]])  # one per donor
     with torch.no_grad():
-        chips, own_levels = generator(renders, code=code), _without_donors(generator)(renders, code=code)
+        chips, _, own_levels = generator(renders, code=code, parts=True)
     assert donor_index(code[:, 0], 4).tolist() == [0, 1, 2, 3]
     for chip, own, donor in zip(chips, own_levels, real):
         probs = torch.linspace(0, 1, 21)
@@ -68,7 +60,7 @@ def test_the_gradient_moves_ranks_only():
     generator = _generator_with_donors(_real())
     renders = torch.rand(2, 1, 32, 32, generator=torch.Generator().manual_seed(3)) * 0.6 - 0.8
     code = torch.zeros(2, 1)
-    own = _without_donors(generator)(renders, code=code).detach().requires_grad_(True)
+    own = generator(renders, code=code, parts=True).own_levels.detach().requires_grad_(True)
     matched = _RanksOnly.apply(own, generator.at_donor_levels(own.detach(), code))
     torch.testing.assert_close(matched, generator(renders, code=code))
     (matched * torch.randn(2, 1, 32, 32)).sum().backward()
