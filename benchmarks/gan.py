@@ -2,13 +2,16 @@
 
     .venv/bin/python benchmarks/gan.py                       # CPU, and CUDA when present
     .venv/bin/python benchmarks/gan.py --nets small paper --train-size 128 --train-steps 20
+    .venv/bin/python benchmarks/gan.py --devices cuda --kinds sasgan --gan small_data --precision bf16 fp32
 
 Training steps/s come from the real training loop on a temporary folder of random
 images, timed as the difference between an N+2-step and a 2-step run, so start-up
 (reading data, TensorBoard) is excluded. Beside the wall-clock rate it prints the CPU
 seconds per step (all threads): on a machine that other jobs share, the wall clock
 measures the load, while CPU time at 1 thread (--threads 1) measures the work; one SAS GAN or DCGAN step is n_critic = 5
-critic updates and one generator update. The paper net at 256² on a CPU takes
+critic updates and one generator update (`--gan small_data`: the recipe `sasmi fit` trains, 2 critic
+updates). On CUDA each training is timed under bf16 autocast and in float32 (`--precision`;
+a CPU always trains in float32). The paper net at 256² on a CPU takes
 minutes; it runs on CUDA by default and on the CPU only when asked for.
 """
 from __future__ import annotations
@@ -39,6 +42,8 @@ from sasmi.gan.kinds.dcgan import DCGAN  # noqa: E402
 from sasmi.gan.kinds.sasgan import SASGAN  # noqa: E402
 from sasmi.gan.loop import train  # noqa: E402
 from sasmi.images import write_gray  # noqa: E402
+from sasmi.masks import write_class_mask  # noqa: E402
+from sasmi.pipeline import sasgan_settings  # noqa: E402
 
 
 def sync(device: torch.device) -> None:
@@ -60,16 +65,18 @@ def inference_ms(net: str, device: torch.device, batch: int, size: int = 256, re
 
 
 def training_steps_per_s(kind, net: str, device: torch.device, size: int, steps: int,
-                         data: Path) -> tuple[float, float]:
+                         data: Path, settings: dict, bf16: bool) -> tuple[float, float]:
     """(steps/s by the wall clock, CPU seconds per step over all threads)."""
     inputs = {"real": data / "real"}
     if kind is SASGAN:
         inputs |= {"renders": data / "renders", "phi": data / f"ae{size}"}
 
     def run(n: int) -> tuple[float, float]:
-        cfg = replace(kind.config(), steps=n, size=size, sample_every=10 ** 7, checkpoint_every=10 ** 7)
+        cfg = replace(kind.config(), steps=n, size=size, sample_every=10 ** 7, checkpoint_every=10 ** 7, amp=bf16)
         if kind is SASGAN:
-            cfg = replace(cfg, generator=GENERATOR_NETS[net], critic=CRITIC_NETS[net])
+            size_of = GENERATOR_NETS[net]  # the recipe's generator options at this net's width and depth
+            generator = replace(settings.get("generator", cfg.generator), width=size_of.width, blocks=size_of.blocks)
+            cfg = replace(cfg, **{**settings, "generator": generator, "critic": CRITIC_NETS[net]})
         if kind is DCGAN:
             cfg = replace(cfg, dcgan=DCGAN_NETS[net], critic=CRITIC_NETS[net], final_samples=1)
         out = Path(tempfile.mkdtemp(dir=data))
@@ -92,11 +99,16 @@ def main() -> None:
     parser.add_argument("--kinds", nargs="+", choices=("autoencoder", "sasgan", "dcgan"),
                         default=["autoencoder", "sasgan", "dcgan"], help="run kinds to time (default all)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default torch's choice)")
+    parser.add_argument("--gan", metavar="RECIPE", help="SAS GAN settings of a recipe (as `sasmi fit --gan`; "
+                                                        "default: the SasganRun defaults)")
+    parser.add_argument("--precision", nargs="+", choices=("bf16", "fp32"), default=["bf16", "fp32"],
+                        help="CUDA training precisions to time (default both; a CPU trains in float32)")
     parser.add_argument("--no-inference", action="store_true", help="time training only")
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
     devices = args.devices or ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    settings = sasgan_settings(args.gan) if args.gan else {}
 
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp)
@@ -104,6 +116,9 @@ def main() -> None:
         for i in range(16):
             write_gray(data / "real" / f"{i}.png", rng.random((args.train_size, args.train_size)))
             write_gray(data / "renders" / "images" / f"{i}.png", rng.random((args.train_size, args.train_size)))
+            mask = np.zeros((args.train_size, args.train_size), np.uint8)  # a target and its shadow, for the mask term
+            mask[40:56, 40:56], mask[40:56, 56:96] = 1, 2
+            write_class_mask(data / "renders" / "masks" / f"{i}.png", mask)
         ae_cfg = replace(AUTOENCODER.config(), steps=1, size=args.train_size)
         train(AUTOENCODER, ae_cfg, data / f"ae{args.train_size}", {"real": data / "real"}, torch.device("cpu"))
 
@@ -118,10 +133,12 @@ def main() -> None:
                 for kind in (AUTOENCODER, SASGAN, DCGAN)[net != "small":]:  # the autoencoder has one size
                     if kind.name not in args.kinds:
                         continue
-                    rate, cpu = training_steps_per_s(kind, net, device, args.train_size, args.train_steps, data)
-                    print(f"{label:>12}  train {kind.name:<11} {net:<5} {args.train_size}² batch "
-                          f"{kind.config().batch}: {rate:6.2f} steps/s, {cpu:6.2f} CPU s/step "
-                          f"(load {os.getloadavg()[0]:.1f})")
+                    for precision in args.precision if device.type == "cuda" else ["fp32"]:
+                        rate, cpu = training_steps_per_s(kind, net, device, args.train_size, args.train_steps,
+                                                         data, settings, precision == "bf16")
+                        print(f"{label:>12}  train {kind.name:<11} {net:<5} {args.train_size}² batch "
+                              f"{kind.config().batch} {precision}: {rate:6.2f} steps/s, {cpu:6.2f} CPU s/step "
+                              f"(load {os.getloadavg()[0]:.1f})")
 
 
 if __name__ == "__main__":
