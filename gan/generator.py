@@ -52,6 +52,11 @@ class GeneratorConfig:
     # donors' levels), and each chip it translates then takes one. Measured better than learning it
     # (docs/gan.md, *Donor levels*)
     donor_levels_after: bool = False
+    # with either donor option: pixels darker than this fraction of the chip's median (smoothed over
+    # 1 px: a lone dark speckle takes the donor's level) keep their own ratio to the median where
+    # that is darker than the donor's level. A donor's darkest levels are its own shadow's, often smaller or paler than
+    # the render's, and matched alone they paled the shadows (docs/gan.md, *Donor levels*); 0: off
+    donor_shadow: float = 0.0
 
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
@@ -145,6 +150,23 @@ def donor_index(code: torch.Tensor, donors: int) -> torch.Tensor:
     return (uniform * donors).long().clamp(0, donors - 1)
 
 
+def keep_shadows(own: torch.Tensor, matched: torch.Tensor, fraction: float) -> torch.Tensor:
+    """`matched` where the chip `own` is darker than `fraction` of its median (after a 1-px Gaussian)
+    made no brighter than `own`'s ratio to its median times the matched chip's median: each
+    (B, 1, S, S) in [-1, 1] → like them. Ratios are of intensities, (x + 1) / 2."""
+    u, v = (own + 1) / 2, (matched + 1) / 2  # (B, 1, S, S) in [0, 1]
+    smooth = F.conv2d(F.pad(u, (3, 3, 3, 3), mode="reflect"), _GAUSS_1PX.to(u))
+    dark = smooth < fraction * smooth.flatten(1).median(dim=1).values.view(-1, 1, 1, 1)
+    median_u = u.flatten(1).median(dim=1).values.view(-1, 1, 1, 1).clamp_min(1e-6)
+    median_v = v.flatten(1).median(dim=1).values.view(-1, 1, 1, 1)
+    kept = torch.where(dark, torch.minimum(v, u / median_u * median_v), v)
+    return kept * 2 - 1
+
+
+_GAUSS_1PX = (lambda g: (g[:, None] * g[None, :] / g.sum() ** 2)[None, None])(
+    torch.exp(-torch.arange(-3.0, 4.0) ** 2 / 2))  # (1, 1, 7, 7): σ = 1 px, to 3σ
+
+
 class _RanksOnly(torch.autograd.Function):
     """Forward: the chip at a donor's levels. Backward: straight through to the chip at its own
     levels, less what would change its mean or its contrast: those the donor's levels replace, and
@@ -189,6 +211,7 @@ class Generator(nn.Module):
         self.residual, self.correction_scale = cfg.residual, cfg.correction_scale
         self.tone = ToneCurve(style=TONE_STYLE if cfg.tone_style else 0) if cfg.tone_curve else None
         self.donor_levels, self.donor_levels_after = cfg.donor_levels, cfg.donor_levels_after
+        self.donor_shadow = cfg.donor_shadow
         donors = cfg.donor_levels or cfg.donor_levels_after
         # (N, len(DONOR_PROBS)): each real chip's levels; filled by `set_donors` when training starts,
         # then kept in the checkpoint with the weights, so translation draws from the same chips
@@ -249,7 +272,8 @@ class Generator(nn.Module):
         with torch.no_grad():
             donor = self.donors[donor_index(code[:, -1], len(self.donors))].to(x)  # (B, K)
             own = _donor_quantiles(x)  # (B, K)
-            return remap(x, own, donor)
+            matched = remap(x, own, donor)
+            return matched if not self.donor_shadow else keep_shadows(x, matched, self.donor_shadow)
 
 
 def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu",

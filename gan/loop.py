@@ -89,7 +89,7 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     world = distributed.world()
     run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples, main=world.main)
     start = run.step
-    # bf16 on CUDA (autocast keeps losses, norms and the optimisers in float32); a CPU trains in float32
+    # bf16 on CUDA when the config asks (autocast keeps losses, norms and the optimisers in float32)
     precision = torch.autocast(device.type, torch.bfloat16, enabled=cfg.amp and device.type == "cuda")
     try:
         for step in range(start + 1, cfg.steps + 1):

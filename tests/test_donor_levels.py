@@ -89,7 +89,8 @@ def test_the_donors_travel_in_the_checkpoint_and_a_seed_picks_the_same_one(tmp_p
 @pytest.mark.parametrize("other", [{"generator": GeneratorConfig(residual=True, tone_curve=True, donor_levels=True)},
                                    {"generator": DONOR, "levels_weight": 1.0},
                                    {"generator": GeneratorConfig(residual=True, donor_levels=True,
-                                                                 donor_levels_after=True)}])
+                                                                 donor_levels_after=True)},
+                                   {"generator": GeneratorConfig(residual=True, donor_shadow=0.4)}])
 def test_donor_levels_refuse_the_other_ways_of_choosing_levels(other):
     with pytest.raises(SasmiError, match="donor_levels"):
         SasganRun(**other).validate()
@@ -154,6 +155,33 @@ def test_after_the_critic_sees_the_nets_own_levels_and_translation_a_donors():
         torch.testing.assert_close(chip.flatten().quantile(probs), donor.flatten().quantile(probs), atol=0.02, rtol=0)
 
 
+def _chip_with_shadow(size: int = 32) -> torch.Tensor:
+    """(1, 1, S, S) in [-1, 1]: a speckled floor of intensity about 0.4 and a 6 × 10 px shadow at 0.02."""
+    u = 0.4 * (0.75 + 0.5 * torch.rand(1, 1, size, size, generator=torch.Generator().manual_seed(3)))
+    u[..., 12:18, 10:20] = 0.02
+    return u * 2 - 1
+
+
+def test_donor_shadow_keeps_the_shadow_as_dark_against_the_floor_as_it_was():
+    """A donor whose darkest levels are pale (0.2 of full scale, where the floor's median is 0.5)
+    would give the shadow a ratio of 0.4 to the floor; with `donor_shadow` it keeps its own, 0.05."""
+    chip = _chip_with_shadow()
+    pale = torch.linspace(0.2, 0.8, 32 * 32).view(1, 1, 32, 32) * 2 - 1
+    matched = {}
+    for fraction in (0.0, 0.4):
+        generator = Generator(replace(AFTER, donor_shadow=fraction)).eval()
+        generator.set_donors(pale)
+        matched[fraction] = (generator.at_donor_levels(chip, torch.zeros(1, 1)) + 1) / 2  # (1, 1, S, S) in [0, 1]
+
+    def shadow_to_floor(u: torch.Tensor) -> float:
+        return float(u[..., 13:17, 11:19].mean() / u.median())
+
+    assert shadow_to_floor((chip + 1) / 2) == pytest.approx(0.05, abs=0.01)
+    assert shadow_to_floor(matched[0.0]) > 0.35  # the plain match: the donor's pale darkest levels
+    assert shadow_to_floor(matched[0.4]) == pytest.approx(0.05, abs=0.01)
+    assert torch.equal(matched[0.4][..., 24:, :], matched[0.0][..., 24:, :])  # the floor takes the donor's levels
+
+
 def test_after_trains_the_very_same_generator(tmp_path):
     """The donors' levels come after training: the weights are those of the same run without them."""
     data = toy_gan_inputs(tmp_path / "data", 32, phi_steps=5)
@@ -167,7 +195,7 @@ def test_after_trains_the_very_same_generator(tmp_path):
 
 
 def test_the_real_levels_recipe_is_small_data_with_donors_after():
-    """Two files that must not drift apart: the only difference is the one setting."""
+    """Two files that must not drift apart: the only difference is the donors' levels."""
     small, real = sasgan_settings("small_data"), sasgan_settings("real_levels")
-    assert real.pop("generator") == replace(small.pop("generator"), donor_levels_after=True)
+    assert real.pop("generator") == replace(small.pop("generator"), donor_levels_after=True, donor_shadow=0.4)
     assert real == small

@@ -190,7 +190,7 @@ def test_config_travels_inside_the_checkpoint(runs):
     assert ckpt["kind"] == "sasgan" and ckpt["config"]["generator"] == {"width": 4, "blocks": 1, "residual": False,
                                                                      "correction_scale": 1, "tone_curve": False,
                                                                      "tone_style": False, "donor_levels": False,
-                                                                     "donor_levels_after": False}
+                                                                     "donor_levels_after": False, "donor_shadow": 0.0}
     assert set(ckpt["inputs"]) == {"real", "renders", "phi"}
     assert pickle.loads(pickle.dumps(ckpt["config"])) == ckpt["config"]  # plain types only
 

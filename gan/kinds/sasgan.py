@@ -60,6 +60,10 @@ class SasganRun(GanRun):
         if donor and (self.generator.tone_curve or self.levels_weight > 0):
             raise SasmiError("generator.donor_levels(_after) gives each chip a real chip's gray levels: it replaces "
                              "generator.tone_curve and levels_weight (turn those off)")
+        check_number("generator.donor_shadow", self.generator.donor_shadow, 0.0, 1.0, why="a fraction of the median")
+        if self.generator.donor_shadow and not donor:
+            raise SasmiError("generator.donor_shadow keeps shadows through a donor's levels: needs "
+                             "generator.donor_levels or donor_levels_after")
         if self.generator.donor_levels and self.generator.donor_levels_after:
             raise SasmiError("generator.donor_levels and donor_levels_after: choose one (learned, or in "
                              "translation only)")
