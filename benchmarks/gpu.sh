@@ -2,7 +2,7 @@
 # One lent GPU machine, one call: SAS GAN speed under bf16 and float32, then `sasmi fit` on the GPU
 # for MINUTES and its realism report on the validation chips.
 #
-#   benchmarks/gpu.sh DATA MINUTES RECIPE
+#   benchmarks/gpu.sh DATA MINUTES RECIPE      (SPEED=0: the fit alone)
 #
 # The device machine has PyTorch but no Mitsuba and no package index, so everything comes with the
 # call (the device tool's `carry`): .whl/ holds the sasmi wheel (`pip wheel --no-deps -w .whl .`),
@@ -25,7 +25,7 @@ cd /tmp  # not the checkout: its sasmi/ folder is not the installed package (gan
 python3 -c "import torch, sasmi; print('torch', torch.__version__, torch.cuda.is_available() and torch.cuda.get_device_name())"
 
 echo "== speed: bf16 and float32, the recipe's SAS GAN at 128², and generator inference at 256²"
-timeout 150 python3 "$repo/benchmarks/gan.py" --devices $device --nets small paper --kinds sasgan \
+[ "${SPEED:-1}" = 0 ] || timeout 150 python3 "$repo/benchmarks/gan.py" --devices $device --nets small paper --kinds sasgan \
     --gan "$recipe" --train-steps ${STEPS:-100} 2>&1 | grep -v Warning | tee "$out/speed.txt"
 
 echo "== sasmi fit on the GPU, $minutes minutes, --gan $recipe"
@@ -45,6 +45,8 @@ EOF
     | tee "$out/fit.log" | grep "sasmi fit"
 cp $run/report/metrics.json "$out/metrics.json"
 cp $run/fit.json "$out/fit.json"
+mkdir -p "$out/sasgan/checkpoints"  # the trained generator, to translate and evaluate at home
+cp $run/sasgan/config.json "$out/sasgan/" && cp $run/sasgan/checkpoints/last.pt "$out/sasgan/checkpoints/"
 
 echo "== the same generator without the donors' levels (its own gray levels)"
 python3 - "$run" "$device" <<'EOF'
