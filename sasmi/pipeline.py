@@ -39,7 +39,7 @@ class FitPlan:
     preset: str = "cylinder_chip"
     renders: int = 400  # the GAN's render set, and the set the report translates
     seed: int = 0
-    gan: str = "small_data"  # SAS GAN settings: a shipped recipe's name (gan/recipes/) or a TOML file
+    gan: str = "real_levels"  # SAS GAN settings: a shipped recipe's name (gan/recipes/) or a TOML file
     phi: str = ""  # an existing autoencoder run to use instead of training RUN/phi
 
     def identity(self) -> dict:

@@ -4,9 +4,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import torch
 
 from sasmi.cli import main
-from sasmi.images import write_gray
+from sasmi.images import read_gray, write_gray
 
 
 def _chips(folder, n, seed):
@@ -34,6 +35,12 @@ def test_fit_runs_every_stage_then_resumes_without_retraining(tmp_path, capsys):
     assert state["done"] == ["phi", "renders", "sasgan", "translated", "report"]
     err = capsys.readouterr().err
     assert "[3/5 sasgan]" in err and "min of the budget left" in err
+    # the default recipe, real_levels: each translated chip takes a real chip's gray levels
+    generator = torch.load(out / "sasgan" / "checkpoints" / "last.pt", weights_only=True)["config"]["generator"]
+    assert generator["donor_levels_after"] and generator["donor_shadow"] == 0.4
+    real_medians = np.array([np.median(read_gray(path)) for path in real.glob("*.png")])
+    for path in (out / "translated" / "images").glob("*.png"):
+        assert np.abs(real_medians - np.median(read_gray(path))).min() < 0.005, path
 
     last = out / "sasgan" / "checkpoints" / "last.pt"
     stamp = last.stat().st_mtime_ns

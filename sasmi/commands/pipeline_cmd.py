@@ -22,8 +22,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", default="cylinder_chip", help="scene preset: a TOML file or a shipped preset's name")
     p.add_argument("--renders", type=int, default=400, help="chips rendered for the GAN and the report")
     p.add_argument("--seed", type=int, default=0, help="seed of the renders and of every training")
-    p.add_argument("--gan", default="small_data",
-                   help="SAS GAN settings: a shipped recipe (small_data, real_levels, baseline) or a TOML file of them")
+    p.add_argument("--gan", default="real_levels",
+                   help="SAS GAN settings: a shipped recipe (real_levels, the default; small_data, the same without "
+                        "a real chip's gray levels after translation; baseline) or a TOML file of them")
     p.add_argument("--phi", metavar="RUN", default="",
                    help="an autoencoder run to use instead of training one (e.g. one φ for several recipes)")
     add_device(p)
