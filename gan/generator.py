@@ -54,8 +54,9 @@ class GeneratorConfig:
     donor_levels_after: bool = False
     # with either donor option: pixels darker than this fraction of the chip's median (smoothed over
     # 1 px: a lone dark speckle takes the donor's level) keep their own ratio to the median where
-    # that is darker than the donor's level. A donor's darkest levels are its own shadow's, often smaller or paler than
-    # the render's, and matched alone they paled the shadows (docs/gan.md, *Donor levels*); 0: off
+    # that is darker than the donor's level. A donor's darkest levels are its own shadow's, often
+    # smaller or paler than the render's: matched alone they paled the shadows (docs/gan.md,
+    # *Keeping the shadows*); 0: off
     donor_shadow: float = 0.0
 
 
