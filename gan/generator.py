@@ -59,6 +59,11 @@ class GeneratorConfig:
     # *Keeping the shadows*); 0: off
     donor_shadow: float = 0.0
 
+    @property
+    def takes_donors(self) -> bool:
+        """Whether chips take a real chip's levels (learned or after training): the generator keeps donors."""
+        return self.donor_levels or self.donor_levels_after
+
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
 # (64 wide, 9 blocks); Reed et al.'s exact widths were not available to us.
@@ -151,6 +156,10 @@ def donor_index(code: torch.Tensor, donors: int) -> torch.Tensor:
     return (uniform * donors).long().clamp(0, donors - 1)
 
 
+_GAUSS_1PX = (lambda g: (g[:, None] * g[None, :] / g.sum() ** 2)[None, None])(
+    torch.exp(-torch.arange(-3.0, 4.0) ** 2 / 2))  # (1, 1, 7, 7): σ = 1 px, to 3σ
+
+
 def keep_shadows(own: torch.Tensor, matched: torch.Tensor, fraction: float) -> torch.Tensor:
     """`matched` where the chip `own` is darker than `fraction` of its median (after a 1-px Gaussian)
     made no brighter than `own`'s ratio to its median times the matched chip's median: each
@@ -162,10 +171,6 @@ def keep_shadows(own: torch.Tensor, matched: torch.Tensor, fraction: float) -> t
     median_v = v.flatten(1).median(dim=1).values.view(-1, 1, 1, 1)
     kept = torch.where(dark, torch.minimum(v, u / median_u * median_v), v)
     return kept * 2 - 1
-
-
-_GAUSS_1PX = (lambda g: (g[:, None] * g[None, :] / g.sum() ** 2)[None, None])(
-    torch.exp(-torch.arange(-3.0, 4.0) ** 2 / 2))  # (1, 1, 7, 7): σ = 1 px, to 3σ
 
 
 class _RanksOnly(torch.autograd.Function):
@@ -213,7 +218,7 @@ class Generator(nn.Module):
         self.tone = ToneCurve(style=TONE_STYLE if cfg.tone_style else 0) if cfg.tone_curve else None
         self.donor_levels, self.donor_levels_after = cfg.donor_levels, cfg.donor_levels_after
         self.donor_shadow = cfg.donor_shadow
-        donors = cfg.donor_levels or cfg.donor_levels_after
+        donors = cfg.takes_donors
         # (N, len(DONOR_PROBS)): each real chip's levels; filled by `set_donors` when training starts,
         # then kept in the checkpoint with the weights, so translation draws from the same chips
         # (not in the checkpoints of runs without donors, which then load as before)

@@ -56,7 +56,7 @@ class SasganRun(GanRun):
             raise SasmiError("generator.tone_curve needs generator.residual = true (the curve remaps the render)")
         if self.generator.tone_style and not self.generator.tone_curve:
             raise SasmiError("generator.tone_style needs generator.tone_curve = true (the code chooses the curve)")
-        donor = self.generator.donor_levels or self.generator.donor_levels_after
+        donor = self.generator.takes_donors
         if donor and (self.generator.tone_curve or self.levels_weight > 0):
             raise SasmiError("generator.donor_levels(_after) gives each chip a real chip's gray levels: it replaces "
                              "generator.tone_curve and levels_weight (turn those off)")
@@ -106,7 +106,7 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
 
     # ---- models and optimisers
     generator = Generator(cfg.generator).to(device)
-    if cfg.generator.donor_levels or cfg.generator.donor_levels_after:  # before the moving average copies it
+    if cfg.generator.takes_donors:  # before the moving average copies it
         generator.set_donors(real.center(list(range(len(real)))).to(device))
     # (n, style_size) ~ N(0, 1): the sample grids' own codes, so that a run's grids compare step to step
     fixed_code = torch.randn(len(fixed), generator.style_size, generator=torch.Generator().manual_seed(cfg.seed))
