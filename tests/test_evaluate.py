@@ -123,6 +123,42 @@ def test_precision_recall():
     assert p == 0 and r == 0
 
 
+def test_every_set_is_compared_on_the_same_real_splits(monkeypatch):
+    from pathlib import Path
+
+    from sasmi.eval.config import EvalConfig
+    from sasmi.eval.features import FeatureSet
+    from sasmi.eval.run import realism_table
+
+    rng = np.random.default_rng(9)
+    def feature_set(name, n):
+        return FeatureSet(name, Path(name), rng.integers(0, 255, (n, 8, 8), dtype=np.uint8), rng.standard_normal((n, 6)))
+
+    halves = []  # the real half B of each FID left: the ratio's, (set, B) then (A, B) per split
+    monkeypatch.setattr(ev, "fid", lambda a, b: halves.append(b.tobytes()) or 1.0)
+    monkeypatch.setattr(ev, "fid_bootstrap", lambda *args: ev.Estimate(1.0, 0.0))
+    monkeypatch.setattr(ev, "fid_real_split", lambda *args: ev.Estimate(1.0, 0.0))
+    realism_table(feature_set("real", 40), [feature_set("a", 30), feature_set("b", 300)],
+                  EvalConfig(bootstrap=5, kid_subsets=2))
+    assert len(halves) == 2 * 2 * 5 and halves[:10] == halves[10:] and len(set(halves[:10])) == 5
+
+
+def test_recall_does_not_fall_as_more_chips_are_generated():
+    # a perfect generator in many dimensions (φ has 1024): unmatched, its recall falls as it makes more
+    rng = np.random.default_rng(8)
+    real = rng.standard_normal((40, 256))
+    few, many = rng.standard_normal((40, 256)), rng.standard_normal((800, 256))  # the real distribution
+    _, recall_few = ev.precision_recall_matched(real, few, k=3, n=30)
+    _, recall_many = ev.precision_recall_matched(real, many, k=3, n=30)
+    _, recall_real = ev.precision_recall_real_split(real, k=3, n=30)
+    assert ev.precision_recall(real, many, k=3)[1] < recall_few.value - 0.1  # the balls shrink
+    assert abs(recall_many.value - recall_few.value) < 0.1
+    assert abs(recall_many.value - recall_real.value) < 0.15 and recall_many.std > 0
+    collapsed = 0.05 * rng.standard_normal((800, 256))  # still caught at equal sizes
+    precision, recall = ev.precision_recall_matched(real, collapsed, k=3, n=50)
+    assert precision.value > 0.9 and recall.value < 0.2
+
+
 def test_nearest_and_copy_statistics():
     rng = np.random.default_rng(6)
     real = rng.standard_normal((50, 8))

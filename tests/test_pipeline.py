@@ -30,7 +30,8 @@ def test_fit_runs_every_stage_then_resumes_without_retraining(tmp_path, capsys):
         assert (out / folder).is_dir(), folder
     assert len(list((out / "translated" / "images").glob("*.png"))) == 8
     metrics = json.loads((out / "report" / "metrics.json").read_text())
-    assert {"sasgan", "renders"} <= set(metrics["realism"]) and "image_statistics" in metrics
+    assert set(metrics["realism"]) == {"real→real", "sasgan", "renders", "train_real"} and "image_statistics" in metrics
+    assert metrics["sets"]["train_real"] == {"dir": str(real), "n": 12}  # the reference: the GAN's own real chips
     state = json.loads((out / "fit.json").read_text())
     assert state["done"] == ["phi", "renders", "sasgan", "translated", "report"]
     err = capsys.readouterr().err
@@ -59,6 +60,9 @@ def test_fit_reuses_a_phi_run_and_refuses_a_bad_recipe(tmp_path, capsys):
     second = tmp_path / "second"
     assert main([*base, "--out", str(second), "--phi", str(first / "phi")]) == 0
     assert not (second / "phi").exists() and (second / "report" / "metrics.json").is_file()
+    # without --validation the report compares with --real itself: no train_real row, a warning
+    report = json.loads((second / "report" / "metrics.json").read_text())
+    assert "train_real" not in report["realism"] and "optimistic" in (second / "report" / "report.md").read_text()
 
     recipe = tmp_path / "recipe.toml"
     recipe.write_text("mask_wieght = 3\n")

@@ -62,7 +62,8 @@ def realism_markdown(rows: dict, real: FeatureSet) -> str:
     for name, r in rows.items():
         n = " + ".join(map(str, r["n"])) if isinstance(r["n"], list) else str(r["n"])
         lines.append(f"| {name} | {n} | {pm(r['fid'], r['fid_std'], '.3g')} | {pm(r['fid_ratio'], r['fid_ratio_std'], '.2f')} | "
-                     f"{mean_share(r)} | {pm(r['kid'] * 1e3, r['kid_std'] * 1e3, '.3f')} | {r['precision']:.2f} | {r['recall']:.2f} | "
+                     f"{mean_share(r)} | {pm(r['kid'] * 1e3, r['kid_std'] * 1e3, '.3f')} | "
+                     f"{pm(r['precision'], r['precision_std'], '.2f')} | {pm(r['recall'], r['recall_std'], '.2f')} | "
                      f"{r['gray_levels'] * 1e3:.0f} |")
     lines += ["", "- **φ-FID**: the set against the whole real set, ± the std over bootstrap resamples; real→real "
               "is the mean ± std over random splits of the real set into halves.",
@@ -80,7 +81,8 @@ def realism_markdown(rows: dict, real: FeatureSet) -> str:
               "mean ± std over random subsets; ≈ 0 (it can be negative) when the set looks real, reliable for "
               "small sets.",
               "- **precision / recall**: share of the set inside the real k-NN manifold, and of the real set "
-              "inside the set's (k = 3). Precision is realism, recall is diversity.",
+              "inside the set's (k = 3), both sets drawn to the same size (a ball shrinks as its set grows), "
+              "mean ± std over random draws. Precision is realism, recall is diversity.",
               "",
               "Lower FID, ratio and KID and higher precision and recall are more realistic."]
     return "\n".join(lines)

@@ -132,23 +132,25 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     half_a, half_b = real.phi[order[:half]], real.phi[order[half:]]
     reference = metrics.fid_real_split(real.phi, cfg.bootstrap, cfg.seed)
     k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
-    precision, recall = metrics.precision_recall(half_a, half_b, cfg.pr_k)
+    precision, recall = metrics.precision_recall_real_split(real.phi, cfg.pr_k, cfg.bootstrap, cfg.seed)
     real_levels = gray_levels(real.images)
     rows = {REAL_VS_REAL: {"n": [len(half_a), len(half_b)], "fid": reference.value, "fid_std": reference.std,
                            "fid_ratio": 1.0, "fid_ratio_std": math.nan,
                            "fid_mean_part": metrics.fid_mean_part(half_a, half_b), "kid": k.value, "kid_std": k.std,
-                           "precision": precision, "recall": recall,
+                           "precision": precision.value, "precision_std": precision.std,
+                           "recall": recall.value, "recall_std": recall.std,
                            "gray_levels": level_distance(real_levels[order[:half]], real_levels[order[half:]])}}
     for i, s in enumerate(tqdm(sets, desc="realism", unit="set", leave=False, disable=None)):
         seed = cfg.seed + 1 + i
         f = metrics.fid_bootstrap(s.phi, real.phi, cfg.bootstrap, seed)
-        ratio = metrics.fid_ratio_matched(s.phi, real.phi, cfg.bootstrap, seed)
+        ratio = metrics.fid_ratio_matched(s.phi, real.phi, cfg.bootstrap, cfg.seed)  # every set on the same splits
         k = metrics.kid(s.phi / scale, real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, seed)
-        precision, recall = metrics.precision_recall(real.phi, s.phi, cfg.pr_k)
+        precision, recall = metrics.precision_recall_matched(real.phi, s.phi, cfg.pr_k, cfg.bootstrap, seed)
         rows[s.name] = {"n": len(s.phi), "fid": f.value, "fid_std": f.std, "fid_ratio": ratio.value,
                         "fid_ratio_std": ratio.std, "fid_mean_part": metrics.fid_mean_part(s.phi, real.phi),
                         "kid": k.value, "kid_std": k.std,
-                        "precision": precision, "recall": recall,
+                        "precision": precision.value, "precision_std": precision.std,
+                        "recall": recall.value, "recall_std": recall.std,
                         "gray_levels": level_distance(gray_levels(s.images), real_levels)}
     return rows
 
