@@ -25,7 +25,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="REPORT", help="folder for the report")
     p.add_argument("--preset", type=Path, metavar="TOML", help="pose sweeps: scene preset whose first target is swept")
     p.add_argument("--generator", type=Path, metavar="RUN", help="pose sweeps: SAS GAN run that translates them")
-    p.add_argument("--bootstrap", type=int, default=100, metavar="N", help="FID resamples behind each ± (default 100)")
+    p.add_argument("--bootstrap", type=int, default=500, metavar="N",  # EvalConfig's: the config stays unimported here
+                   help="FID resamples, real splits and draws behind each ± (default 500)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda or cuda:N")
     cache = p.add_mutually_exclusive_group()
