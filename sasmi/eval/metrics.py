@@ -197,10 +197,9 @@ def precision_recall_matched(feats_real: np.ndarray, feats_fake: np.ndarray, k: 
         n = 1  # nothing to draw: every replicate would be the same
     rng = np.random.default_rng(seed)
     with one_blas_thread():  # small matrices: threads cost 50 × the work (0.14 s a draw beside a training)
-        reps = np.array([precision_recall(real[rng.choice(len(real), m, replace=False)],
-                                          fake[rng.choice(len(fake), m, replace=False)], k) for _ in range(n)])
-    spread = reps.std(axis=0, ddof=1) if n > 1 else np.full(2, math.nan)
-    return Estimate(float(reps[:, 0].mean()), float(spread[0])), Estimate(float(reps[:, 1].mean()), float(spread[1]))
+        reps = [precision_recall(real[rng.choice(len(real), m, replace=False)],
+                                 fake[rng.choice(len(fake), m, replace=False)], k) for _ in range(n)]
+    return _precision_recall_estimates(reps)
 
 
 def precision_recall_real_split(feats_real: np.ndarray, k: int = 3, n: int = 100,
@@ -215,9 +214,14 @@ def precision_recall_real_split(feats_real: np.ndarray, k: int = 3, n: int = 100
         for _ in range(n):
             order = rng.permutation(len(x))
             reps.append(precision_recall(x[order[:half]], x[order[half:2 * half]], k))
-    reps = np.array(reps)
-    spread = reps.std(axis=0, ddof=1) if n > 1 else np.full(2, math.nan)
-    return Estimate(float(reps[:, 0].mean()), float(spread[0])), Estimate(float(reps[:, 1].mean()), float(spread[1]))
+    return _precision_recall_estimates(reps)
+
+
+def _precision_recall_estimates(reps: list[tuple[float, float]]) -> tuple[Estimate, Estimate]:
+    """(precision, recall) replicates → each one's mean ± std over them (NaN ± for one)."""
+    values = np.array(reps)  # (n, 2)
+    spread = values.std(axis=0, ddof=1) if len(values) > 1 else np.full(2, math.nan)
+    return tuple(Estimate(float(values[:, i].mean()), float(spread[i])) for i in range(2))
 
 
 def on_manifold(points: np.ndarray, reference: np.ndarray, k: int = 3) -> np.ndarray:
