@@ -40,6 +40,7 @@ STATISTICS = {
     "acf_range": ("1-px autocorr. along range", ""),
     "acf_track": ("1-px autocorr. along track", ""),
     "far_near": ("far-third / near-third", ""),
+    "periodicity": ("floor periodicity (spectral peak / median)", ""),
     "shadow_floor": ("shadow level / floor level", ""),
 }
 MASK_STATISTICS = ("shadow_length", "shadow_width", "highlight_length", "highlight_width")
@@ -134,11 +135,16 @@ def speckle_looks(image01: np.ndarray, floor: np.ndarray, block: int) -> float:
     return float(np.median(looks)) if looks else float("nan")
 
 
-def floor_autocorrelation(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[float, float]:
-    """1-px correlation coefficient of the high-passed floor (image / local mean - 1), along range and track."""
+def _highpassed_floor(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """(image / local mean - 1 on the usable floor, 0 elsewhere; where it is usable)."""
     local = filters.gaussian(image01, sigma=sigma, preserve_range=True)
     ok = floor & (local > 2.0 / 255.0)
-    hp = np.where(ok, image01 / np.maximum(local, 1e-6) - 1.0, 0.0)
+    return np.where(ok, image01 / np.maximum(local, 1e-6) - 1.0, 0.0), ok
+
+
+def floor_autocorrelation(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[float, float]:
+    """1-px correlation coefficient of the high-passed floor (image / local mean - 1), along range and track."""
+    hp, ok = _highpassed_floor(image01, floor, sigma)
 
     def corr(a, b, both):
         if both.sum() < 16:
@@ -151,6 +157,24 @@ def floor_autocorrelation(image01: np.ndarray, floor: np.ndarray, sigma: float) 
     along_range = corr(hp[:, :-1], hp[:, 1:], ok[:, :-1] & ok[:, 1:])
     along_track = corr(hp[:-1, :], hp[1:, :], ok[:-1, :] & ok[1:, :])
     return along_range, along_track
+
+
+def floor_periodicity(image01: np.ndarray, floor: np.ndarray, sigma: float, scale: float) -> float:
+    """Strongest peak of the high-passed floor's power spectrum over its median, at wavelengths of
+    2.5-11 px (at 128 px) in directions more than 10° off both axes: sand ripples as a regular
+    stripe pattern, which none of the real chips show, give peaks far above speckle's flat
+    spectrum. The axes are left out because sonar banding lies along them."""
+    hp, _ = _highpassed_floor(image01, floor, sigma)
+    h, w = hp.shape
+    window = np.hanning(h)[:, None] * np.hanning(w)[None, :]
+    power = np.abs(np.fft.fftshift(np.fft.fft2(hp * window))) ** 2
+    ky, kx = np.meshgrid(np.fft.fftshift(np.fft.fftfreq(h)), np.fft.fftshift(np.fft.fftfreq(w)), indexing="ij")
+    cycles_per_px = np.hypot(kx, ky)
+    angle = np.degrees(np.arctan2(ky, kx)) % 90.0  # 0 and 90: the two axes
+    ring = ((cycles_per_px >= 1.0 / (11.0 * scale)) & (cycles_per_px <= 1.0 / (2.5 * scale))
+            & (angle > 10.0) & (angle < 80.0))
+    median = np.median(power[ring])
+    return float(power[ring].max() / median) if median > 0 else float("nan")
 
 
 def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[str, float]:
@@ -174,6 +198,7 @@ def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[
         floor = ~_box_mask(image01.shape, [target.highlight, target.shadow], pad=max(2, round(3 * s)))
     out["looks"] = speckle_looks(image01, floor, max(4, round(est.block * s)))
     out["acf_range"], out["acf_track"] = floor_autocorrelation(image01, floor, est.highpass_sigma * s)
+    out["periodicity"] = floor_periodicity(image01, floor, est.highpass_sigma * s, s)
     third = w // 3
     near, far = image01[:, :third][floor[:, :third]], image01[:, -third:][floor[:, -third:]]
     if near.size and far.size and np.median(near) > 0:

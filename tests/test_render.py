@@ -132,7 +132,7 @@ def test_next_scene_reuses_the_compiled_kernels():
     import drjit as dr
 
     preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
-    first, second = preset.sample(1, 0), preset.sample(1, 1)
+    first, second = preset.sample(1, 2), preset.sample(1, 3)  # a cylinder, then a block
     assert first.targets[0].shape != second.targets[0].shape and first.sonar.cone_angle != second.sonar.cone_angle
     renderer = Renderer(size=32, spp=4)
     renderer.render(first)

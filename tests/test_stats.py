@@ -90,6 +90,20 @@ def test_correlated_speckle_and_range_falloff():
     assert abs(image_statistics(saturated)["saturated"] - 100 * 128 / SIZE ** 2) < 0.05
 
 
+def test_ripples_raise_the_floor_periodicity_and_banding_does_not():
+    rng = np.random.default_rng(4)
+    rows, cols = np.mgrid[:SIZE, :SIZE]
+    plain = image_statistics(FLOOR * speckle(rng))["periodicity"]
+    # sand ripples of 6 px wavelength, crests at 45°, modulating the backscatter by ±30 %
+    ripples = 1.0 + 0.3 * np.sin(2 * np.pi * (rows + cols) / (6 * np.sqrt(2)))
+    rippled = image_statistics(FLOOR * ripples * speckle(rng))["periodicity"]
+    # the same stripes along track (constant in each range column): sonar banding, not ripples
+    banding = 1.0 + 0.3 * np.sin(2 * np.pi * cols / 6)
+    banded = image_statistics(FLOOR * banding * speckle(rng))["periodicity"]
+    assert plain < 30 and banded < 30, (plain, banded)  # real chips: median 17
+    assert rippled > 5 * plain, (rippled, plain)
+
+
 def test_real_chips_targets_found_where_they_are(real_chips):
     targets = chip_statistics(real_chips / "targets", 128)
     seafloor = chip_statistics(real_chips / "seafloor", 128)
