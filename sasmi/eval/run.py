@@ -86,8 +86,8 @@ def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, ou
 def image_statistics(folders: dict[str, Path], statistics: Statistics) -> Report:
     """The per-set image-statistics table: `statistics(folder)` → {column: number} for each set.
 
-    The hook for sasmi.stats.chip_statistics (written on another branch): `sasmi evaluate`
-    passes it as `statistics` to `evaluate_folders`, which calls this.
+    `sasmi evaluate` and `sasmi fit` pass `sasmi.stats.median_statistics` as `statistics` to
+    `evaluate_folders`, which calls this; the evaluation itself imports nothing of sasmi.stats.
     """
     rows = {name: statistics(Path(folder)) for name, folder in folders.items()}
     return Report({"image_statistics": rows}, (Section("Image statistics", statistics_markdown(rows)),))
