@@ -28,7 +28,7 @@ from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, r
 from sasmi.labels import has_labels
 
 Log = Callable[[str], None]
-Statistics = Callable[[Path], dict]  # a folder → {statistic name: number}, e.g. sasmi.stats.chip_statistics
+Statistics = Callable[[Path], dict]  # a folder → {statistic name: number}, e.g. sasmi.stats.median_statistics
 
 
 def quiet(message: str) -> None:
