@@ -5,7 +5,8 @@ a penalty keeps its gradient norm near 1 at random interpolates, λ = 10. The al
 is StyleGAN2's pair: the non-saturating logistic loss with the R1 penalty on real images
 (Mescheder et al. 2018); R1 needs the logistic loss, since under the Wasserstein loss
 nothing would bound the fake scores. The SAS GAN adds the φ constraint of Reed et al.
-(the generator may change an image's φ only by a margin) and a mask-driven contrast term.
+(the generator may change an image's φ only by a margin), a mask-driven contrast term and a
+mask-driven shadow shape term.
 """
 from __future__ import annotations
 
@@ -138,6 +139,54 @@ def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Te
     if not present.any():
         return fake.sum() * 0.0  # keeps the graph; no shadow or target in this batch
     return (wanted[present] - got[present]).clamp_min(0.0).mean()
+
+
+def shadow_outline(images: torch.Tensor, masks: torch.Tensor, ring: int, smooth: float = 1.5,
+                   dark_fraction: float = 0.5, softness: float = 0.1) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per image: (dark seafloor beside the shadow, pale shadow), each in shadow areas, (B,), NaN without shadow.
+
+    images: (B, 1, S, S) in [-1, 1]; masks as in `mask_contrasts`. The evaluation's "dark"
+    (sasmi/eval/preservation.py) with its hard threshold made a sigmoid: on the image in [0, 1]
+    blurred by `smooth` px, a pixel is dark by sigmoid((dark_fraction·m − s) / (softness·m)), m the
+    median of the seafloor (detached). "Beside": the darkness summed over the seafloor within `ring`
+    px of the shadow or target (a shadow widened by its own width on each side scores 2); "pale":
+    the shadow's pixels not dark. Each lowers the evaluation's shadow IoU.
+    """
+    radius = max(1, round(3 * smooth))
+    taps = torch.exp(-0.5 * (torch.arange(-radius, radius + 1, device=images.device) / smooth) ** 2)
+    taps = (taps / taps.sum()).to(images)
+    s = F.pad((images + 1) / 2, (radius,) * 4, mode="reflect")
+    s = F.conv2d(F.conv2d(s, taps.view(1, 1, 1, -1)), taps.view(1, 1, -1, 1))  # (B, 1, S, S) in [0, 1]
+    floor, shadow = masks == 0, masks == 2
+    level = torch.where(floor, s.detach(), torch.full_like(s, float("nan"))).flatten(1).nanmedian(dim=1).values
+    level = level.clamp_min(1e-3).view(-1, 1, 1, 1)
+    dark = torch.sigmoid((dark_fraction * level - s) / (softness * level))
+    beside = F.max_pool2d((masks > 0).to(images), 2 * ring + 1, stride=1, padding=ring) * floor  # (B, 1, S, S)
+    area = shadow.sum(dim=(1, 2, 3))
+    nan = torch.full(area.shape, float("nan"), dtype=images.dtype, device=images.device)
+
+    def per_shadow_area(x: torch.Tensor) -> torch.Tensor:
+        return torch.where(area > 0, x.sum(dim=(1, 2, 3)) / area.clamp_min(1), nan)
+
+    return per_shadow_area(dark * beside), per_shadow_area((1 - dark) * shadow)
+
+
+def shadow_shape_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Tensor, ring: int) -> torch.Tensor:
+    """Hinges keeping each shadow's outline: over the images with a shadow, the mean of
+    max(0, beside(fake) − beside(render)) + max(0, pale(fake) − pale(render)) (`shadow_outline`).
+
+    fake, render: (B, 1, S, S) in [-1, 1]. The contrast term keeps a shadow darker than the floor
+    around it, and is met as well when that floor darkens too: the shadow widens (`runs/fit66`,
+    docs/gan.md). Two hinges, not one on a soft IoU: asked for the render's IoU, where darker
+    inside buys wider outside, the generator made shadows darker than real ones (`runs/fit68`).
+    """
+    with torch.no_grad():
+        allowed = torch.stack(shadow_outline(render, masks, ring))  # (2, B)
+    got = torch.stack(shadow_outline(fake, masks, ring))
+    present = ~torch.isnan(got)
+    if not present.any():
+        return fake.sum() * 0.0  # keeps the graph; no shadow in this batch
+    return 2 * (got[present] - allowed[present]).clamp_min(0.0).mean()  # both rows NaN together: the two means' sum
 
 
 LEVEL_QUANTILES = torch.linspace(0.02, 0.98, 25)  # and the tail: 0.99, 0.995

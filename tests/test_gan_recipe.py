@@ -14,7 +14,9 @@ from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
 from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.loop import train
-from sasmi.gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty
+from sasmi.eval.preservation import measure_image
+from sasmi.gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty, shadow_outline, shadow_shape_loss
+from sasmi.labels import TargetLabel
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
 from test_gan_train import toy_gan_inputs
@@ -210,6 +212,81 @@ def test_mask_loss_moves_shadows_the_right_way(data):
 def test_mask_loss_needs_masks(tmp_path, data):
     with pytest.raises(SasmiError, match="no masks/"):
         _phases({**data, "renders": data["real"]}, mask_weight=1.0)
+
+
+# ---------------------------------------------------------------- the shadow shape term
+
+def _shadow_scene(widen: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """A render (1, 1, S, S) in [-1, 1] with a target and its shadow, the shadow `widen` px wider
+    along track (image y) on each side than its mask, and the mask."""
+    masks = torch.zeros(1, 1, SIZE, SIZE, dtype=torch.uint8)
+    masks[..., 12:18, 8:12], masks[..., 12:18, 12:24] = 1, 2
+    image = -0.2 + 0.05 * torch.randn(1, 1, SIZE, SIZE, generator=torch.Generator().manual_seed(1))
+    image[masks == 1] = 0.8
+    image[..., 12 - widen:18 + widen, 12:24] = -0.9
+    return image, masks
+
+
+def _measured_iou(image: torch.Tensor, masks: torch.Tensor) -> float:
+    """The evaluation's shadow IoU (sasmi/eval/preservation.py) of one signed image."""
+    target = TargetLabel(params={"shape": "box"}, pixel_centre=(9.5, 14.5), bbox=(8, 12, 12, 18), shadow_bbox=(12, 12, 24, 18))
+    return measure_image(((image[0, 0] + 1) / 2).detach().numpy(), masks[0, 0].numpy(), [target])["shadow_iou"]
+
+
+def test_dark_floor_beside_a_shadow_grows_as_the_evaluations_shadow_iou_falls():
+    masks = _shadow_scene(0)[1]
+    beside = [shadow_outline(_shadow_scene(w)[0], masks, ring=4)[0].item() for w in (0, 2, 4)]
+    iou = [_measured_iou(_shadow_scene(w)[0], masks) for w in (0, 2, 4)]
+    assert beside[0] < 0.1 < beside[1] < beside[2] and iou[0] > iou[1] > iou[2], (beside, iou)
+    assert 1.0 < beside[2] < 1.6, beside  # 2 × 4 rows of 12 px beside a 6 × 12 px shadow: 4 / 3 of its area
+    assert all(torch.isnan(x).all() for x in shadow_outline(_shadow_scene(0)[0], torch.zeros_like(masks), ring=4))
+
+
+LR_SHAPE = 1.0
+
+
+def test_shadow_shape_term_narrows_a_widened_shadow_and_darkens_nothing():
+    render, masks = _shadow_scene(0)
+    widened = _shadow_scene(3)[0]
+    assert shadow_shape_loss(render, render, masks, ring=4) == 0  # the render keeps its own shape
+    fake = widened.clone().requires_grad_(True)
+    shadow_shape_loss(fake, render, masks, ring=4).backward()
+    assert (fake.grad <= 0).all()  # gradient descent brightens; nothing is darkened
+    optimiser = torch.optim.SGD([fake], lr=LR_SHAPE)
+    for _ in range(30):
+        optimiser.zero_grad()
+        shadow_shape_loss(fake, render, masks, ring=4).backward()
+        optimiser.step()
+    before, after = _measured_iou(widened, masks), _measured_iou(fake, masks)
+    assert after > before + 0.2, (before, after)
+    assert fake.detach()[masks == 2].mean() < -0.5  # the shadow itself stays dark
+
+
+def test_shadow_shape_term_darkens_a_shadow_paled_above_the_dark_threshold():
+    render, masks = _shadow_scene(0)
+    pale = render.clone()
+    pale[masks == 2] = -0.5  # 0.25 in [0, 1] on a floor at 0.4: above half of it, no longer "dark"
+    pale.requires_grad_(True)
+    loss = shadow_shape_loss(pale, render, masks, ring=4)
+    assert loss > 0.5, loss
+    loss.backward()
+    assert (pale.grad[masks == 2] > 0).all()  # gradient descent darkens the shadow
+
+
+def test_the_run_applies_its_shadow_shape_term(data):
+    images = ImageSet(data["renders"], SIZE, masks=True)
+    renders, masks = images.center(list(range(8))), torch.stack(images.masks)
+    beside = {}
+    for weight in (0.0, 100.0):
+        phases = _phases(data, shadow_weight=weight, phi_weight=0.0)
+        for _ in range(15):
+            logs = phases.generator_step()
+        with torch.no_grad():
+            beside[weight] = shadow_outline(phases.state["generator"](renders), masks, ring=8)[0].nanmean().item()
+    assert "loss/shadow_shape" in logs and "loss/mask" not in logs
+    assert beside[100.0] < beside[0.0] - 0.1, beside
+    with pytest.raises(SasmiError, match="shadow_weight"):
+        replace(TOY, shadow_weight=-1.0).validate()
 
 
 def test_recipe_flags_from_the_command_line(tmp_path, data):

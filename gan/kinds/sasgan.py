@@ -1,5 +1,5 @@
 """The SAS GAN run: render → realistic image, an adversarial critic + the φ constraint (Reed et al.)
-+ the small-data recipe: critic augmentation, a generator moving average, a mask contrast term."""
++ the small-data recipe: critic augmentation, a generator moving average, mask contrast and shadow shape terms."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -16,7 +16,7 @@ from sasmi.gan.generator import Generator, GeneratorConfig
 from sasmi.gan.kinds.common import (GanRun, Noise, adam, adversarial_loss, before_after, critic_phase, critic_view,
                               grad_norm, spread)
 from sasmi.gan.loop import Kind, Logs, Phases
-from sasmi.gan.losses import energy_distance, gray_levels, mask_contrast_loss, phi_loss
+from sasmi.gan.losses import energy_distance, gray_levels, mask_contrast_loss, phi_loss, shadow_shape_loss
 from sasmi.gan.run import check_number, file_fingerprint
 from sasmi.errors import SasmiError
 
@@ -31,6 +31,7 @@ class SasganRun(GanRun):
     mask_keep: float = 0.5  # fraction of a render's shadow/highlight contrast the translation must keep
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
     mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
+    shadow_weight: float = 0.0  # weight of the shadow shape term (needs masks/): the shadow's IoU with its mask kept
     # weight of the gray-level term: the energy distance between the translations' per-chip gray-level
     # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it
     # judges the whole image and trains the curve alone to meet it. A critic that learns from ~100
@@ -44,6 +45,7 @@ class SasganRun(GanRun):
         check_number("--ema", self.ema, 0.0, 0.99999, why="0 turns it off")
         check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
         check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
+        check_number("shadow_weight", self.shadow_weight, 0.0, 1e6)
         check_number("levels_weight", self.levels_weight, 0.0, 1e6)
         if self.levels_weight > 0 and self.batch < 2:
             raise SasmiError(f"levels_weight = {self.levels_weight:g} compares the chips of a batch: needs --batch 2 or more")
@@ -90,7 +92,7 @@ def moving_average(generator: Generator, decay: float) -> AveragedModel:
 def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phases:
     # ---- data and the frozen φ encoder
     real = ImageSet(inputs["real"], cfg.size)
-    renders = ImageSet(inputs["renders"], cfg.size, masks=cfg.mask_weight > 0)
+    renders = ImageSet(inputs["renders"], cfg.size, masks=cfg.mask_weight > 0 or cfg.shadow_weight > 0)
     real_batches = Batches(real, cfg.batch, seed=cfg.seed)
     render_batches = Batches(renders, cfg.batch, seed=cfg.seed + 1)
     noise, view_noise, style_noise = Noise(cfg.seed + 2), Noise(cfg.seed + 4), Noise(cfg.seed + 5)
@@ -149,10 +151,14 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
         constraint = phi_loss(phi_render, encoder(fake), cfg.phi_margin)
         loss = adversarial + cfg.phi_weight * constraint
         logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
-        if masks is not None:
+        if cfg.mask_weight > 0:
             contrast = mask_contrast_loss(fake, reference, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
+        if cfg.shadow_weight > 0:
+            shape = shadow_shape_loss(fake, reference, masks, cfg.mask_ring)
+            loss = loss + cfg.shadow_weight * shape
+            logs["loss/shadow_shape"] = shape.item()
         if cfg.generator.donor_levels:
             # the net's own levels, which the donor's replace, held at the render's: nothing else
             # holds them. The plain straight-through gradient drove them to ±1 (ties: one flat gray
