@@ -75,6 +75,11 @@ def reconstruction_loss(reconstruction: torch.Tensor, target: torch.Tensor) -> t
     return ((reconstruction - target) ** 2).mean()
 
 
+def floor_near(region: torch.Tensor, masks: torch.Tensor, ring: int) -> torch.Tensor:
+    """The seafloor (mask 0) within `ring` px of `region`: (B, 1, S, S) bool."""
+    return F.max_pool2d(region.float(), 2 * ring + 1, stride=1, padding=ring).bool() & (masks == 0)
+
+
 def mask_contrasts(images: torch.Tensor, masks: torch.Tensor, ring: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Per image: (floor − shadow, target − floor) mean brightness, each (B,), NaN where absent.
 
@@ -82,18 +87,14 @@ def mask_contrasts(images: torch.Tensor, masks: torch.Tensor, ring: int) -> tupl
     "floor" is the seafloor within `ring` px of the shadow (for the first) or of the target
     (for the second): the local background the eye compares them with.
     """
-    floor = masks == 0
-
     def mean(region: torch.Tensor) -> torch.Tensor:
         n = region.sum(dim=(1, 2, 3))
         total = (images * region).sum(dim=(1, 2, 3))
         return torch.where(n > 0, total / n.clamp_min(1), torch.full_like(total, float("nan")))
 
-    def near(region: torch.Tensor) -> torch.Tensor:
-        return F.max_pool2d(region.float(), 2 * ring + 1, stride=1, padding=ring).bool() & floor
-
     shadow, target = masks == 2, masks == 1
-    return mean(near(shadow)) - mean(shadow), mean(target) - mean(near(target))
+    return (mean(floor_near(shadow, masks, ring)) - mean(shadow),
+            mean(target) - mean(floor_near(target, masks, ring)))
 
 
 def highlight_peaks(images: torch.Tensor, masks: torch.Tensor, bright_percentile: float = 99.0) -> torch.Tensor:
@@ -161,7 +162,7 @@ def shadow_outline(images: torch.Tensor, masks: torch.Tensor, ring: int, smooth:
     level = torch.where(floor, s.detach(), torch.full_like(s, float("nan"))).flatten(1).nanmedian(dim=1).values
     level = level.clamp_min(1e-3).view(-1, 1, 1, 1)
     dark = torch.sigmoid((dark_fraction * level - s) / (softness * level))
-    beside = F.max_pool2d((masks > 0).to(images), 2 * ring + 1, stride=1, padding=ring) * floor  # (B, 1, S, S)
+    beside = floor_near(masks > 0, masks, ring)  # (B, 1, S, S)
     area = shadow.sum(dim=(1, 2, 3))
     nan = torch.full(area.shape, float("nan"), dtype=images.dtype, device=images.device)
 
@@ -183,10 +184,10 @@ def shadow_shape_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Ten
     with torch.no_grad():
         allowed = torch.stack(shadow_outline(render, masks, ring))  # (2, B)
     got = torch.stack(shadow_outline(fake, masks, ring))
-    present = ~torch.isnan(got)
+    present = ~torch.isnan(got[0])  # (B,): the images with a shadow
     if not present.any():
         return fake.sum() * 0.0  # keeps the graph; no shadow in this batch
-    return 2 * (got[present] - allowed[present]).clamp_min(0.0).mean()  # both rows NaN together: the two means' sum
+    return (got[:, present] - allowed[:, present]).clamp_min(0.0).mean(dim=1).sum()  # beside + pale
 
 
 LEVEL_QUANTILES = torch.linspace(0.02, 0.98, 25)  # and the tail: 0.99, 0.995

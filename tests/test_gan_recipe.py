@@ -1,4 +1,5 @@
 """The small-data recipe: each option does what it says, and a test fails if it is ignored."""
+import inspect
 from dataclasses import replace
 
 import numpy as np
@@ -14,6 +15,7 @@ from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
 from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.loop import train
+from sasmi.eval.config import PreservationConfig
 from sasmi.eval.preservation import measure_image
 from sasmi.gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty, shadow_outline, shadow_shape_loss
 from sasmi.labels import TargetLabel
@@ -240,6 +242,10 @@ def test_dark_floor_beside_a_shadow_grows_as_the_evaluations_shadow_iou_falls():
     assert beside[0] < 0.1 < beside[1] < beside[2] and iou[0] > iou[1] > iou[2], (beside, iou)
     assert 1.0 < beside[2] < 1.6, beside  # 2 × 4 rows of 12 px beside a 6 × 12 px shadow: 4 / 3 of its area
     assert all(torch.isnan(x).all() for x in shadow_outline(_shadow_scene(0)[0], torch.zeros_like(masks), ring=4))
+    # the term's "dark" is the evaluation's: the same blur and threshold (gan/ does not import sasmi.eval)
+    defaults = inspect.signature(shadow_outline).parameters
+    assert (defaults["smooth"].default, defaults["dark_fraction"].default) == \
+        (PreservationConfig.smooth, PreservationConfig.dark_fraction)
 
 
 def test_shadow_shape_term_narrows_a_widened_shadow_and_darkens_nothing():
