@@ -278,6 +278,26 @@ def test_shadow_shape_term_darkens_a_shadow_paled_above_the_dark_threshold():
     assert (pale.grad[masks == 2] > 0).all()  # gradient descent darkens the shadow
 
 
+def test_shadow_shape_term_pulls_an_overdone_shadow_back_to_its_render():
+    # hinges were met with a margin: the generator learnt shadows darker than the render's and a
+    # bright rim beside them (runs/fit70). Each change here lies beyond the blur's reach (4 px) of
+    # the other side of the shadow's edge, so that only a two-sided term sees it
+    masks = torch.zeros(1, 1, SIZE, SIZE, dtype=torch.uint8)
+    masks[..., 8:24, 8:12], masks[..., 8:24, 12:28] = 1, 2  # a 16 × 16 px shadow
+    render = -0.2 + 0.05 * torch.randn(1, 1, SIZE, SIZE, generator=torch.Generator().manual_seed(1))
+    render[masks == 1], render[masks == 2] = 0.8, -0.75  # the shadow at 0.3 of the floor: partly "pale"
+    darker, rim = render.clone(), render.clone()
+    darker[..., 13:19, 17:23] = -0.95  # the shadow's core darker than the render's
+    rim[..., 1:3, 12:28] = rim[..., 29:31, 12:28] = 0.3  # a bright rim on the floor 5 px beside it
+    for fake in (darker, rim):
+        fake.requires_grad_(True)
+        loss = shadow_shape_loss(fake, render, masks, ring=8)
+        assert loss > 0.001, loss
+        loss.backward()
+    assert (darker.grad[..., 13:19, 17:23] < 0).all()  # gradient descent brightens the shadow
+    assert (rim.grad[..., 1:3, 12:28] > 0).all() and (rim.grad[..., 29:31, 12:28] > 0).all()  # darkens the rim
+
+
 def test_the_run_applies_its_shadow_shape_term(data):
     images = ImageSet(data["renders"], SIZE, masks=True)
     renders, masks = images.center(list(range(8))), torch.stack(images.masks)

@@ -31,7 +31,7 @@ class SasganRun(GanRun):
     mask_keep: float = 0.5  # fraction of a render's shadow/highlight contrast the translation must keep
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
     mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
-    shadow_weight: float = 0.0  # weight of the shadow shape term (needs masks/): no wider, no paler a shadow than the render's
+    shadow_weight: float = 0.0  # weight of the shadow shape term (needs masks/): the render's shadow outline, no wider or narrower, no paler or darker
     # weight of the gray-level term: the energy distance between the translations' per-chip gray-level
     # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it
     # judges the whole image and trains the curve alone to meet it. A critic that learns from ~100
