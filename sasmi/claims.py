@@ -1,7 +1,8 @@
 """Claim files: any number of processes, on any number of hosts, share one output folder.
 
 Before rendering item NAME (a chip index, a tar shard) a process creates CLAIMS/NAME.claim
-with O_CREAT|O_EXCL, which exactly one process can win on a local or NFSv3+ filesystem.
+by a hard link from its own draft, which exactly one process can win on a local or NFSv3+
+filesystem (as O_CREAT|O_EXCL), and which never shows the claim empty.
 The file records who holds it: host, pid and the pid's start time (so a recycled pid is
 not mistaken for the holder). The holder removes it when the item is complete.
 
@@ -63,18 +64,23 @@ class Claims:
             return True
         path = self._path(name)
         self.folder.mkdir(parents=True, exist_ok=True)
-        for _ in range(2):  # once, and once more after taking over a stale claim
-            try:
-                fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                if not self._take_over(path):
-                    return False
-                continue
-            with os.fdopen(fd, "w") as f:
-                f.write(self._me)
-            self.held.add(name)
-            return True
-        return False
+        # the claim appears whole, by a hard link as exclusive as O_EXCL: a holder killed between
+        # creating it and writing it would leave an empty claim that blocks the chip for a minute
+        draft = path.with_name(f".{path.name}.{HOST}.{os.getpid()}.new")
+        draft.write_text(self._me)
+        try:
+            for _ in range(2):  # once, and once more after taking over a stale claim
+                try:
+                    os.link(draft, path)
+                except FileExistsError:
+                    if not self._take_over(path):
+                        return False
+                    continue
+                self.held.add(name)
+                return True
+            return False
+        finally:
+            draft.unlink()
 
     def _is_stale(self, path: Path) -> tuple[bool, str]:
         try:

@@ -202,6 +202,20 @@ def test_claims_across_hosts_go_by_age(tmp_path):
     assert json.loads(away.read_text())["pid"] == os.getpid()
 
 
+def test_a_claim_never_shows_empty(tmp_path):
+    # a holder killed between creating its claim and writing it left an empty claim, which counts
+    # as alive for a minute: a rerun skipped the chip and never assembled labels.jsonl (a flaky
+    # test_resume_after_kill_gives_identical_files). A write that fails stands in for the kill
+    from sasmi.claims import Claims
+
+    dying, rerun = Claims(tmp_path), Claims(tmp_path)
+    dying._me = None  # writing the holder's record fails
+    with pytest.raises(TypeError):
+        dying.take("a")
+    assert list(tmp_path.iterdir()) == []  # no claim, empty or not, and no draft
+    assert rerun.take("a") and json.loads((tmp_path / "a.claim").read_text())["pid"] == os.getpid()
+
+
 def test_a_rerun_after_an_early_failure_may_change_settings(tmp_path, capsys):
     out = tmp_path / "early"
     out.mkdir()
