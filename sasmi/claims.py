@@ -66,7 +66,7 @@ class Claims:
         self.folder.mkdir(parents=True, exist_ok=True)
         # the claim appears whole, by a hard link as exclusive as O_EXCL: a holder killed between
         # creating it and writing it would leave an empty claim that blocks the chip for a minute
-        draft = path.with_name(f".{path.name}.{HOST}.{os.getpid()}.new")
+        draft = path.with_name(f".{path.name}.{HOST}.{os.getpid()}.{threading.get_ident()}.new")
         draft.write_text(self._me)
         try:
             for _ in range(2):  # once, and once more after taking over a stale claim
