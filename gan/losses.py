@@ -119,7 +119,7 @@ def highlight_peaks(images: torch.Tensor, masks: torch.Tensor, bright_percentile
 
 
 def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Tensor, keep: float,
-                       ring: int, highlight: str = "mean") -> torch.Tensor:
+                       ring: int, highlight: str = "mean", least_rise: float = 0.0) -> torch.Tensor:
     """Hinge keeping shadows darker and highlights brighter than the floor around them.
 
     For each image and each of (shadow, highlight) present in its mask: max(0, keep·c_render
@@ -128,6 +128,9 @@ def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Te
     generator halve a render's shadow contrast for free but not erase or invert it.
     highlight = "peak" measures the highlight by `highlight_peaks` instead of the target's mean:
     a thin bright strip on a bright floor keeps its rise above the floor's speckle.
+    least_rise (signed units) is the highlight contrast asked of every target whatever its render's:
+    a target the render leaves at or under the floor's speckle (lost) is raised out of it, where
+    `keep` alone asks nothing of it.
     """
     def contrasts(images: torch.Tensor) -> torch.Tensor:  # (2, B)
         shadow, target = mask_contrasts(images, masks, ring)
@@ -135,6 +138,7 @@ def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Te
 
     with torch.no_grad():
         wanted = contrasts(render).clamp_min(0) * keep
+        wanted[1] = wanted[1].clamp_min(least_rise)
     got = contrasts(fake)
     present = ~torch.isnan(got)
     if not present.any():

@@ -17,7 +17,7 @@ from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.loop import train
 from sasmi.eval.config import PreservationConfig
 from sasmi.eval.preservation import measure_image
-from sasmi.gan.losses import mask_contrast_loss, mask_contrasts, r1_penalty, shadow_outline, shadow_shape_loss
+from sasmi.gan.losses import highlight_peaks, mask_contrast_loss, mask_contrasts, r1_penalty, shadow_outline, shadow_shape_loss
 from sasmi.labels import TargetLabel
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
@@ -181,6 +181,35 @@ def test_peak_highlight_term_catches_a_thin_strip_dimmed_into_the_floor():
     loss.backward()
     assert (fake.grad[masks == 1] < 0).any() and (fake.grad <= 0).all()  # brighten the target, dim nothing
     assert mask_contrast_loss(render, render, masks, keep=0.5, ring=4, highlight="peak") == 0
+
+
+def test_least_rise_raises_a_target_its_render_left_under_the_speckle():
+    # the render's target no brighter than the floor's speckle (lost), so `keep` of its clamped
+    # contrast asks only that the translation's rise not be negative; a target that just clears the
+    # speckle passes that, and the least rise asks it well out of the speckle all the same
+    masks = torch.zeros(1, 1, SIZE, SIZE, dtype=torch.uint8)
+    masks[..., 12:20, 10:16] = 1
+    floor = -0.3 + 0.1 * torch.randn(1, 1, SIZE, SIZE, generator=torch.Generator().manual_seed(0))
+    render = torch.where(masks == 1, torch.tensor(-0.3), floor)
+    speckle = torch.quantile(floor[masks == 0], 0.99)
+    fake = torch.where(masks == 1, speckle + 0.05, floor).requires_grad_(True)
+    assert highlight_peaks(render, masks) < 0 < highlight_peaks(fake, masks) < 0.3
+    assert mask_contrast_loss(fake, render, masks, keep=0.5, ring=4, highlight="peak") == 0
+    loss = mask_contrast_loss(fake, render, masks, keep=0.5, ring=4, highlight="peak", least_rise=0.5)
+    assert loss > 0.2
+    loss.backward()
+    assert (fake.grad[masks == 1] < 0).any() and (fake.grad <= 0).all()  # brighten the target, dim nothing
+    lit = render.detach().clone()
+    lit[..., 14:18, 12:14] = 0.6  # a spot well above the speckle meets it
+    assert mask_contrast_loss(lit, render, masks, keep=0.5, ring=4, highlight="peak", least_rise=0.5) == 0
+
+
+def test_the_run_passes_its_least_rise_to_the_mask_term(data):
+    logged = {}
+    for rise in (0.0, 1.5):
+        phases = _phases(data, mask_weight=1.0, mask_highlight="peak", mask_rise=rise, phi_weight=0.0)
+        logged[rise] = phases.generator_step()["loss/mask"]  # same seed: same nets, same batch
+    assert logged[1.5] > logged[0.0], logged
 
 
 def test_the_run_passes_its_highlight_measure_to_the_mask_term(data):

@@ -31,6 +31,7 @@ class SasganRun(GanRun):
     mask_keep: float = 0.5  # fraction of a render's shadow/highlight contrast the translation must keep
     mask_ring: int = 8  # px around a shadow or target that count as its surrounding floor (at S)
     mask_highlight: str = "mean"  # "peak": keep the target's brightest spot above the floor's speckle instead
+    mask_rise: float = 0.0  # the least highlight contrast asked of every target (signed units), its render's aside
     shadow_weight: float = 0.0  # weight of the shadow shape term (needs masks/): the render's shadow outline, no wider or narrower, no paler or darker
     # weight of the gray-level term: the energy distance between the translations' per-chip gray-level
     # distributions (quantiles, tail included) and the real chips' (0: off); with the tone curve it
@@ -45,6 +46,7 @@ class SasganRun(GanRun):
         check_number("--ema", self.ema, 0.0, 0.99999, why="0 turns it off")
         check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
         check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
+        check_number("mask_rise", self.mask_rise, 0.0, 2.0, why="signed units")
         check_number("shadow_weight", self.shadow_weight, 0.0, 1e6)
         check_number("levels_weight", self.levels_weight, 0.0, 1e6)
         if self.levels_weight > 0 and self.batch < 2:
@@ -152,7 +154,8 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
         loss = adversarial + cfg.phi_weight * constraint
         logs = {"loss/generator": adversarial.item(), "loss/phi": constraint.item()}
         if cfg.mask_weight > 0:
-            contrast = mask_contrast_loss(fake, reference, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight)
+            contrast = mask_contrast_loss(fake, reference, masks, cfg.mask_keep, cfg.mask_ring, cfg.mask_highlight,
+                                          cfg.mask_rise)
             loss = loss + cfg.mask_weight * contrast
             logs["loss/mask"] = contrast.item()
         if cfg.shadow_weight > 0:
