@@ -130,7 +130,7 @@ def mask_contrast_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Te
     a thin bright strip on a bright floor keeps its rise above the floor's speckle.
     least_rise (signed units) is the highlight contrast asked of every target whatever its render's:
     a target the render leaves at or under the floor's speckle (lost) is raised out of it, where
-    `keep` alone asks nothing of it.
+    `keep` × its clamped contrast (0) asks it only to reach the speckle.
     """
     def contrasts(images: torch.Tensor) -> torch.Tensor:  # (2, B)
         shadow, target = mask_contrasts(images, masks, ring)
