@@ -42,6 +42,9 @@ STATISTICS = {
     "far_near": ("far-third / near-third", ""),
     "periodicity": ("floor periodicity (spectral peak / median)", ""),
     "shadow_floor": ("shadow level / floor level", ""),
+    # real target chips are cut centred on the contact: a preset spread ±4.5 m along track put most
+    # renders off them in φ while every other row matched (docs/realism.md, *Along track: centred*)
+    "offset_track": ("target offset along track from the centre row", "px"),
 }
 MASK_STATISTICS = ("shadow_length", "shadow_width", "highlight_length", "highlight_width")
 
@@ -191,7 +194,7 @@ def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[
         hr0, hc0, hr1, hc1 = target.highlight
         sr0, sc0, sr1, sc1 = target.shadow
         out.update(highlight_length=hc1 - hc0, highlight_width=hr1 - hr0, shadow_length=sc1 - sc0,
-                   shadow_width=sr1 - sr0)
+                   shadow_width=sr1 - sr0, offset_track=abs((hr0 + hr1 - 1) / 2 - (h - 1) / 2))
         level = floor_level(image01)
         cols = np.nonzero(target.shadow_pixels.any(axis=0))[0]
         out["shadow_floor"] = float(np.median(image01[target.shadow_pixels]) / np.mean(level[cols]))

@@ -64,12 +64,22 @@ def test_sizes_follow_the_boxes_and_scale_with_the_chip():
     assert abs(halved["shadow_length"] - 60) <= 6 and abs(halved["highlight_width"] - 16) <= 4
 
 
+def test_offset_along_track_is_the_highlight_rows_distance_from_the_centre_row():
+    rng = np.random.default_rng(4)
+    # an 8-row highlight whose top row is 60 spans rows 60-67, centred on 63.5 = (128 - 1) / 2
+    centred = image_statistics(target_chip(rng, at=(60, 58)))["offset_track"]
+    above = image_statistics(target_chip(rng, at=(49, 58)))["offset_track"]
+    below = image_statistics(target_chip(rng, at=(72, 58)))["offset_track"]
+    assert centred <= 1.0 and abs(above - 11) <= 1.5 and abs(below - 12) <= 1.5
+
+
 def test_no_target_means_nan_not_garbage():
     rng = np.random.default_rng(2)
     for image in (FLOOR * speckle(rng), target_chip(rng, left=True), target_chip(rng, at=(10, 10))):
         s = image_statistics(np.clip(image, 0, 1))
         assert find_target(image) is None
-        assert all(math.isnan(s[k]) for k in ("shadow_length", "shadow_width", "highlight_length", "shadow_floor"))
+        assert all(math.isnan(s[k]) for k in ("shadow_length", "shadow_width", "highlight_length", "shadow_floor",
+                                                  "offset_track"))
         assert math.isfinite(s["looks"]) and math.isfinite(s["p50"])
 
 
