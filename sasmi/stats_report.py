@@ -66,7 +66,9 @@ WHOLE_NUMBERS = (*MASK_STATISTICS, "p50", "p99")
 def _number(x: float, key: str) -> str:
     if not math.isfinite(x):
         return "—"
-    return f"{x:.0f}" if key in WHOLE_NUMBERS else f"{x:.1f}" if key in ("looks", "periodicity", "offset_track") else f"{x:.2f}"
+    if key in WHOLE_NUMBERS:
+        return f"{x:.0f}"
+    return f"{x:.1f}" if key in ("looks", "periodicity", "offset_track") else f"{x:.2f}"
 
 
 def column_names(results: list[dict]) -> list[str]:
