@@ -24,7 +24,7 @@ threads=$(( $(nproc) / $(wc -w <<<"$seeds") ))  # the CPU side of the fits share
 mkdir -p "$out"
 
 [ "$device" = cpu ] || nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site .whl/*.whl || exit 1
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
 export PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1
 cd /tmp  # not the checkout: its sasmi/ folder is not the installed package (gan/ lives beside it)
 python3 -c "import torch, sasmi; print('torch', torch.__version__, torch.cuda.is_available() and torch.cuda.get_device_name())"
@@ -35,8 +35,8 @@ echo "== speed: bf16 and float32, the recipe's SAS GAN at 128², and generator i
 
 echo "== sasmi fit on the GPU, $minutes minutes, --gan $recipe, seeds $seeds side by side ($threads CPU threads each)"
 for seed in $seeds; do
-    run=/tmp/fit$seed
-    python3 - "$data" "$run" "$minutes" "$recipe" "$seed" <<'EOF'
+    run=/tmp/fit$seed  # on a machine still warm from a call before, the fit resumes there with the larger budget
+    [ -f $run/fit.json ] || python3 - "$data" "$run" "$minutes" "$recipe" "$seed" <<'EOF'
 import shutil, sys
 from sasmi.pipeline import FitPlan, State, with_defaults
 data, run, minutes, recipe, seed = sys.argv[1:]
