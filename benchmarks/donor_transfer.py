@@ -44,6 +44,7 @@ from sasmi.preprocess import load_image  # noqa: E402
 
 EPS = 1e-3  # intensity floor before the logarithm: a zero pixel stays finite
 SHADOW = 0.4  # `real_levels`' donor_shadow
+VARIANTS = ("levels", "two_band", "two_band_levels", "speckle_spread", "truncated")
 
 
 def levels_of(x: torch.Tensor) -> torch.Tensor:
@@ -92,7 +93,7 @@ def variant(name: str, x: torch.Tensor, donors: torch.Tensor, pick: torch.Tensor
         mean = every.mean(0, keepdim=True)
         out = remap(x, levels_of(x), mean + psi * (every[pick] - mean))
     else:
-        raise SystemExit(f"--variants: unknown {name!r}")
+        raise ValueError(f"unknown variant {name!r} (one of {VARIANTS})")
     return keep_shadows(x, out, SHADOW)
 
 
@@ -101,8 +102,7 @@ def main() -> None:
     ap.add_argument("renders", type=Path, help="a render set (images/, masks/, labels.jsonl)")
     ap.add_argument("--donors", type=Path, required=True, help="real train target chips")
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--variants", nargs="+", default=["levels", "two_band", "two_band_levels",
-                                                      "speckle_spread", "truncated"])
+    ap.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     ap.add_argument("--sigma", type=float, default=4.0, help="px; where the smooth band ends")
     ap.add_argument("--psi", type=float, default=0.75, help="truncated: 1 = the donor's levels, 0 = the mean")
     ap.add_argument("--size", type=int, default=128)
