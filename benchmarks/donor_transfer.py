@@ -27,7 +27,6 @@ Use train chips as donors and score against held-out chips (docs/gan.md, *Speckl
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 from pathlib import Path
 
@@ -38,7 +37,8 @@ from scipy.ndimage import gaussian_filter
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from gan.generator import DONOR_PROBS, donor_index, keep_shadows, remap  # noqa: E402
+from gan.generator import donor_index, donor_quantiles, keep_shadows, remap  # noqa: E402
+from gan.translate import carry_labels  # noqa: E402
 from sasmi.images import list_images, read_gray, write_gray  # noqa: E402
 from sasmi.preprocess import load_image  # noqa: E402
 
@@ -47,14 +47,9 @@ SHADOW = 0.4  # `real_levels`' donor_shadow
 VARIANTS = ("levels", "two_band", "two_band_levels", "speckle_spread", "truncated")
 
 
-def levels_of(x: torch.Tensor) -> torch.Tensor:
-    """(B, 1, S, S) → (B, K): each chip's gray levels at DONOR_PROBS, as the generator keeps them."""
-    return torch.quantile(x.flatten(1), DONOR_PROBS.to(x), dim=1).T.contiguous()
-
-
 def take_levels(x: torch.Tensor, levels: torch.Tensor) -> torch.Tensor:
     """x (B, 1, S, S) in [-1, 1], ranks kept, at `levels` (B, K)."""
-    return remap(x, levels_of(x), levels)
+    return remap(x, donor_quantiles(x), levels)
 
 
 def bands(x: torch.Tensor, sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -79,19 +74,19 @@ def variant(name: str, x: torch.Tensor, donors: torch.Tensor, pick: torch.Tensor
     """x (B, 1, S, S) renders in [-1, 1]; donors (D, 1, S, S); pick (B,) donor index → like x."""
     donor = donors[pick]
     if name == "levels":
-        out = take_levels(x, levels_of(donor))
+        out = take_levels(x, donor_quantiles(donor))
     elif name in ("two_band", "two_band_levels"):
         (smooth, speckle), (d_smooth, d_speckle) = bands(x, sigma), bands(donor, sigma)
-        out = from_log(take_levels(smooth, levels_of(d_smooth)) + speckle * spread_ratio(speckle, d_speckle))
+        out = from_log(take_levels(smooth, donor_quantiles(d_smooth)) + speckle * spread_ratio(speckle, d_speckle))
         if name == "two_band_levels":
-            out = take_levels(out, levels_of(donor))
+            out = take_levels(out, donor_quantiles(donor))
     elif name == "speckle_spread":
         (smooth, speckle), (_, d_speckle) = bands(x, sigma), bands(donor, sigma)
-        out = take_levels(from_log(smooth + speckle * spread_ratio(speckle, d_speckle)), levels_of(donor))
+        out = take_levels(from_log(smooth + speckle * spread_ratio(speckle, d_speckle)), donor_quantiles(donor))
     elif name == "truncated":
-        every = levels_of(donors)  # (D, K)
+        every = donor_quantiles(donors)  # (D, K)
         mean = every.mean(0, keepdim=True)
-        out = remap(x, levels_of(x), mean + psi * (every[pick] - mean))
+        out = remap(x, donor_quantiles(x), mean + psi * (every[pick] - mean))
     else:
         raise ValueError(f"unknown variant {name!r} (one of {VARIANTS})")
     return keep_shadows(x, out, SHADOW)
@@ -118,10 +113,7 @@ def main() -> None:
         out = args.out / name
         for path, chip in zip(paths, variant(name, x, donors, pick, args.sigma, args.psi)[:, 0].numpy()):
             write_gray(out / "images" / path.relative_to(args.renders / "images").with_suffix(".png"), (chip + 1) / 2)
-        for labels in ("masks", "instances", "shadows", "labels"):
-            if (args.renders / labels).is_dir():
-                shutil.copytree(args.renders / labels, out / labels, dirs_exist_ok=True)
-        shutil.copy(args.renders / "labels.jsonl", out / "labels.jsonl")
+        carry_labels(args.renders, out)
         print(f"{name}: {len(paths)} chips -> {out}")
 
 

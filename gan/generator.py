@@ -144,7 +144,7 @@ class ToneCurve(nn.Module):
         return remap(x, *self.knots(x, code))  # the knots are x's own quantiles: x lies within them
 
 
-def _donor_quantiles(x: torch.Tensor) -> torch.Tensor:
+def donor_quantiles(x: torch.Tensor) -> torch.Tensor:
     """Each image's gray levels at DONOR_PROBS: (B, 1, S, S) → (B, K)."""
     return torch.quantile(x.flatten(1), DONOR_PROBS.to(x), dim=1).T.contiguous()
 
@@ -231,7 +231,7 @@ class Generator(nn.Module):
 
     def set_donors(self, real: torch.Tensor) -> None:
         """Keep the gray levels of real chips (N, 1, S, S) in [-1, 1] for `donor_levels`."""
-        self.donors = _donor_quantiles(real.float()).to(self.donors)
+        self.donors = donor_quantiles(real.float()).to(self.donors)
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         saved = state_dict.get(prefix + "donors")
@@ -277,7 +277,7 @@ class Generator(nn.Module):
         assert len(self.donors), "donor_levels: set_donors first"
         with torch.no_grad():
             donor = self.donors[donor_index(code[:, -1], len(self.donors))].to(x)  # (B, K)
-            own = _donor_quantiles(x)  # (B, K)
+            own = donor_quantiles(x)  # (B, K)
             matched = remap(x, own, donor)
             return matched if not self.donor_shadow else keep_shadows(x, matched, self.donor_shadow)
 

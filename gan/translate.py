@@ -66,6 +66,19 @@ def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16,
     return out
 
 
+def carry_labels(in_dir: Path, out_dir: Path) -> None:
+    """Copy a render set's masks and labels to the set of its chips remade as PNGs in out_dir/images/:
+    the chips keep their geometry, so the labels still apply."""
+    for masks in ("masks", "instances", "shadows"):  # class, instance and shadow-instance masks
+        if (in_dir / masks).is_dir():
+            shutil.copytree(in_dir / masks, out_dir / masks, dirs_exist_ok=True)
+    if (in_dir / "labels.jsonl").is_file():
+        # the new chips are PNGs whatever the renders were (tiff16, npy): point the labels at them
+        labels = [replace(label, image=str(Path(label.image).with_suffix(".png")) if label.image else label.image)
+                  for label in read_labels(in_dir)]
+        write_text(out_dir / "labels.jsonl", "".join(label.dumps() + "\n" for label in labels))
+
+
 def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_dir: str | os.PathLike,
                      batch: int = 16, provenance: dict | None = None) -> int:
     """Translate every image under in_dir into out_dir as PNG, same relative names; returns the count.
@@ -105,15 +118,8 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
     if not written:
         raise SasmiError(f"{in_dir}: no readable image in it")
 
-    # carry the labels of a render set over
-    for masks in ("masks", "instances", "shadows"):  # class, instance and shadow-instance masks
-        if render_set and (in_dir / masks).is_dir():
-            shutil.copytree(in_dir / masks, out_dir / masks, dirs_exist_ok=True)
-    if render_set and (in_dir / "labels.jsonl").is_file():
-        # the translations are PNGs whatever the renders were (tiff16, npy): point the labels at them
-        labels = [replace(label, image=str(Path(label.image).with_suffix(".png")) if label.image else label.image)
-                  for label in read_labels(in_dir)]
-        write_text(out_dir / "labels.jsonl", "".join(label.dumps() + "\n" for label in labels))
+    if render_set:
+        carry_labels(in_dir, out_dir)
     write_text(out_dir / "translate.json", json.dumps(
         {"input": str(in_dir.resolve()), "images": written, **(provenance or {})}, indent=2) + "\n")
     return written
