@@ -3,6 +3,7 @@
 Stages, each into its own folder of RUN (ordinary folders the other commands accept):
     phi         the φ autoencoder on the φ chips                 (sasmi train autoencoder)
     renders     the preset rendered at the training size        (sasmi render)
+    on_floors   with --floors: the renders' targets on real floors (sasmi.floors)
     sasgan      the SAS GAN, trained until its share of time ends (sasmi train sasgan)
     translated  the renders through the generator                (sasmi translate)
     report      φ-FID/KID/P-R, statistics, target preservation   (sasmi evaluate)
@@ -22,7 +23,7 @@ from pathlib import Path
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, write_text
 
-STAGES = ("phi", "renders", "sasgan", "translated", "report")
+STAGES = ("phi", "renders", "floors", "sasgan", "translated", "report")
 # shares of --minutes for the two trainings; rendering, translating and the report take what they take
 SHARE = {"phi": 0.2, "sasgan": 0.7}
 FIRST_CHUNK = 20  # steps trained before the speed is known
@@ -41,17 +42,29 @@ class FitPlan:
     seed: int = 0
     gan: str = "real_levels"  # SAS GAN settings: a shipped recipe's name (gan/recipes/) or a TOML file
     phi: str = ""  # an existing autoencoder run to use instead of training RUN/phi
+    floors: str = ""  # real seafloor chips the renders' targets are laid on (RUN/on_floors); "" keeps the renders'
 
     def identity(self) -> dict:
         """What a rerun must share with the run it continues (the budget may grow)."""
         d = asdict(self)
         d.pop("minutes")
+        if not d["floors"]:
+            d.pop("floors")  # runs from before --floors still resume
         return d
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        return STAGES if self.floors else tuple(s for s in STAGES if s != "floors")
+
+    @property
+    def gan_input(self) -> Path:
+        """The set the SAS GAN learns from and translates: the renders, or the renders on real floors."""
+        return Path(self.out) / ("on_floors" if self.floors else "renders")
 
 
 def _log(stage: str, message: str, plan: FitPlan, used: float) -> None:
     left = max(plan.minutes * 60 - used, 0) / 60
-    print(f"sasmi fit: [{STAGES.index(stage) + 1}/{len(STAGES)} {stage}] {message} ({left:.0f} min of the budget left)",
+    print(f"sasmi fit: [{plan.stages.index(stage) + 1}/{len(plan.stages)} {stage}] {message} ({left:.0f} min of the budget left)",
           file=sys.stderr, flush=True)
 
 
@@ -129,7 +142,9 @@ def fit(plan: FitPlan, device) -> Path:
     check_size(plan.size)
     preset = load_preset(plan.preset)  # a bad preset and a bad recipe fail before anything is written
     gan_settings = sasgan_settings(plan.gan)
-    for flag, folder in (("--real", plan.real), ("--phi-real", plan.phi_real), ("--validation", plan.validation)):
+    folders = (("--real", plan.real), ("--phi-real", plan.phi_real), ("--validation", plan.validation),
+               *((("--floors", plan.floors),) if plan.floors else ()))
+    for flag, folder in folders:
         if not list_images(folder):
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
     state = State(plan)
@@ -158,10 +173,18 @@ def fit(plan: FitPlan, device) -> Path:
         render_set(RenderJob(preset=preset, out=out / "renders", count=plan.renders, seed=plan.seed, size=plan.size))
         state.add("renders", time.monotonic() - started, done=True)
 
+    if plan.floors and "floors" not in state.done:
+        from sasmi.floors import onto_real_floors
+
+        _log("floors", f"the renders' targets on floors of {plan.floors}", plan, state.used)
+        started = time.monotonic()
+        onto_real_floors(out / "renders", plan.floors, plan.real, plan.gan_input, plan.size, plan.seed)
+        state.add("floors", time.monotonic() - started, done=True)
+
     if "sasgan" not in state.done or stage_time("sasgan") > 60:
-        _log("sasgan", f"training on {plan.real} and the renders", plan, state.used)
+        _log("sasgan", f"training on {plan.real} and {plan.gan_input.name}", plan, state.used)
         train_for(SASGAN, {**gan_settings, "size": plan.size, "seed": plan.seed}, out / "sasgan",
-                  {"real": plan.real, "renders": out / "renders", "phi": phi}, device, stage_time("sasgan"),
+                  {"real": plan.real, "renders": plan.gan_input, "phi": phi}, device, stage_time("sasgan"),
                   "sasgan", state)
         state.add("sasgan", 0.0, done=True)
         state.done = [s for s in state.done if s not in ("translated", "report")]  # a longer GAN run: redo these
@@ -170,9 +193,9 @@ def fit(plan: FitPlan, device) -> Path:
         from sasmi.gan.generator import load_generator
         from sasmi.gan.translate import translate_folder
 
-        _log("translated", "renders through the generator", plan, state.used)
+        _log("translated", f"{plan.gan_input.name} through the generator", plan, state.used)
         started = time.monotonic()
-        translate_folder(load_generator(out / "sasgan", device), out / "renders", out / "translated")
+        translate_folder(load_generator(out / "sasgan", device), plan.gan_input, out / "translated")
         state.add("translated", time.monotonic() - started, done=True)
 
     path = out / "report" / "report.md"
@@ -196,6 +219,8 @@ def report(plan: FitPlan, device) -> Path:
     encoder = as_encoder(Path(plan.phi) if plan.phi else out / "phi", device)
     inputs = {"validation": plan.validation, "real (GAN)": plan.real, "phi real": plan.phi_real}
     sets = {"sasgan": out / "translated", "renders": out / "renders"}
+    if plan.floors:
+        sets["on_floors"] = plan.gan_input  # the GAN's own input: what it added is sasgan against this row
     if Path(plan.validation).resolve() != Path(plan.real).resolve():
         # the real chips the GAN learned from, as one more set: what a generator that reproduced them
         # exactly would reach on validation. Where validation's scenes differ from train's, no
@@ -209,7 +234,7 @@ def report(plan: FitPlan, device) -> Path:
     result = rep.Report({"inputs": inputs, "plan": asdict(plan)}, (rep.Section(
         "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items()) + note),))
     result += evaluate_folders(plan.validation, sets, encoder,
-                               out / "report", log=StderrLog("sasmi fit: [5/5 report]"),
+                               out / "report", log=StderrLog(f"sasmi fit: [{len(plan.stages)}/{len(plan.stages)} report]"),
                                statistics=functools.partial(median_statistics, size=plan.size))
     return rep.write_report(out / "report", result, title="sasmi fit: realism report")
 

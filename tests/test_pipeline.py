@@ -80,3 +80,32 @@ def test_fit_reuses_a_phi_run_and_refuses_a_bad_recipe(tmp_path, capsys):
         err = capsys.readouterr().err
         assert f"--gan {recipe}: its SasganRun cannot be rebuilt ({named})" in err, err
         assert len(err.strip().splitlines()) == 1 and not (tmp_path / "third").exists()
+
+
+def test_fit_with_floors_lays_the_renders_on_them(tmp_path, capsys):
+    real = _chips(tmp_path / "real", 12, 0)
+    floors = tmp_path / "floors"
+    for i in range(4):
+        write_gray(floors / f"f{i}.png", np.random.default_rng(i).gamma(6.0, 0.05, (32, 32)))
+    out = tmp_path / "run"
+    argv = ["fit", "--real", str(real), "--out", str(out), "--minutes", "0.02", "--size", "32", "--renders", "8",
+            "--gan", "baseline", "--floors", str(floors)]
+    assert main(argv) == 0
+    assert len(list((out / "on_floors" / "images").glob("*.png"))) == 8
+    assert (out / "on_floors" / "labels.jsonl").is_file() and (out / "on_floors" / "masks").is_dir()
+    assert json.loads((out / "fit.json").read_text())["done"] == ["phi", "renders", "floors", "sasgan", "translated",
+                                                                  "report"]
+    metrics = json.loads((out / "report" / "metrics.json").read_text())
+    assert {"sasgan", "renders", "on_floors"} <= set(metrics["realism"])
+    assert metrics["sets"]["on_floors"]["dir"] == str(out / "on_floors")
+    assert "[3/6 floors]" in capsys.readouterr().err
+
+
+def test_fit_refuses_an_empty_floors_folder_before_writing(tmp_path, capsys):
+    real, empty = _chips(tmp_path / "real", 12, 0), tmp_path / "empty"
+    empty.mkdir()
+    out = tmp_path / "run"
+    assert main(["fit", "--real", str(real), "--out", str(out), "--minutes", "0.02", "--size", "32",
+                 "--floors", str(empty)]) == 2
+    err = capsys.readouterr().err
+    assert f"--floors {empty}: no image" in err and "Traceback" not in err and not out.exists()

@@ -8,7 +8,8 @@ from sasmi.commands.common import add_device, add_threads, apply_threads, resolv
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="one command from real chips to a trained SAS GAN and its realism report",
-                       description="Trains φ into RUN/phi, renders the preset into RUN/renders, trains the SAS GAN "
+                       description="Trains φ into RUN/phi, renders the preset into RUN/renders (with --floors, "
+                                   "lays their targets on real floors into RUN/on_floors), trains the SAS GAN "
                                    "into RUN/sasgan within the time budget, translates into RUN/translated and "
                                    "writes RUN/report/ (sasmi evaluate's metrics.json). Rerun to resume; raise "
                                    "--minutes to train on.")
@@ -27,6 +28,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "a real chip's gray levels after translation; baseline) or a TOML file of them")
     p.add_argument("--phi", metavar="RUN", default="",
                    help="an autoencoder run to use instead of training one (e.g. one φ for several recipes)")
+    p.add_argument("--floors", metavar="DIR", default="",
+                   help="real seafloor chips (of the same sonar as --real; others are passed over): the renders' "
+                        "targets and shadows are laid on them (RUN/on_floors) before the GAN (docs/gan.md, *Real floors*)")
     add_device(p)
     add_threads(p)
     p.set_defaults(run=run)
@@ -43,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     apply_threads(args.threads)  # before torch is imported
     plan = with_defaults(FitPlan(real=args.real, out=args.out, phi_real=args.phi_real, validation=args.validation,
                                  minutes=args.minutes, size=args.size, preset=args.preset, renders=args.renders,
-                                 seed=args.seed, gan=args.gan, phi=args.phi))
+                                 seed=args.seed, gan=args.gan, phi=args.phi, floors=args.floors))
     path = fit(plan, resolve_device(args.device))
     print(path)
     return 0

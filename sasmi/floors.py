@@ -1,0 +1,125 @@
+"""Renders' targets and shadows on real seafloor chips: the real sonar's floor, the render's geometry and labels.
+
+A render's floor is the preset's idea of the seabed, and it is what renders miss most: the real
+chips that renders cover least are the ones with brighter, more textured floors, bands along
+track and their own range profiles (docs/realism.md, *What the renders miss*). Real seafloor
+chips are the plentiful part of real SAS data. Each composite keeps the render's target and
+shadow as ratios to the render's own floor level, under the multiplicative speckle model, and
+lays them on a real floor chip scaled to that chip's floor level. Everything else is the real
+floor's texture and speckle. The geometry is the render's, so its masks and labels still hold.
+
+A seafloor folder may mix sonars (the shared chips hold MILCO, KLSG and SASSED floors, the
+target chips only MILCO). For each real target chip, the floor chip with the nearest floor
+statistics (`sasmi stats`: levels, speckle, correlation, periodicity) is kept, and renders
+draw their floors from that list.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from sasmi.errors import SasmiError
+from sasmi.images import list_images, write_gray
+from sasmi.stats import chip_statistics
+
+# floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor
+FLOOR_STATISTICS = ("p50", "p99", "looks", "acf_range", "acf_track", "periodicity")
+FEATHER = 2          # px the target and shadow masks grow by before they are blended in
+SMOOTH = 1.5         # px: the blur under which `sasmi evaluate` looks for a highlight
+
+
+def matching_floors(floors: str | os.PathLike, targets: str | os.PathLike, size: int) -> list[Path]:
+    """For each chip of `targets`, the chip of `floors` nearest in FLOOR_STATISTICS (repeats kept).
+
+    Distances are in units of the target chips' interquartile range of each statistic, so
+    that a statistic that varies little among the targets weighs more.
+    """
+    floor_stats = chip_statistics(floors, size=size)
+    target_stats = chip_statistics(targets, size=size)
+    f = np.stack([floor_stats["per_chip"][k] for k in FLOOR_STATISTICS], 1)   # (F, S)
+    t = np.stack([target_stats["per_chip"][k] for k in FLOOR_STATISTICS], 1)  # (T, S)
+    q25, q75 = np.nanpercentile(t, [25, 75], axis=0)
+    scale = np.where(q75 > q25, q75 - q25, 1.0)
+    distance = np.nansum(((t[:, None] - f[None]) / scale) ** 2, axis=-1)        # (T, F); NaN: no evidence
+    paths = list_images(floors)  # chip_statistics' order
+    return [paths[i] for i in np.argmin(distance, axis=1)]
+
+
+def _level_by_column(image01: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """(W,) the floor level of each range column over `where`, smoothed along range (sasmi.stats' floor level)."""
+    counts = where.sum(axis=0)
+    column = np.array([np.median(image01[where[:, c], c]) if counts[c] > 8 else np.nan
+                       for c in range(image01.shape[1])])
+    column = np.where(np.isfinite(column), column, np.nanmedian(column) if np.isfinite(column).any() else 1.0)
+    return np.maximum(ndimage.uniform_filter1d(column, size=9, mode="nearest"), 1.0 / 255.0)
+
+
+def _visibility(image01: np.ndarray, mask: np.ndarray) -> float:
+    """The target's blurred peak over the blurred floor's 99th percentile: `sasmi evaluate` loses a target below 1."""
+    blurred = ndimage.gaussian_filter(image01, SMOOTH)
+    return float(blurred[mask == 1].max() / max(np.percentile(blurred[mask == 0], 99), 1e-6))
+
+
+def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.ndarray:
+    """(H, W) in [0, 1]: the render's target and shadow on a real floor chip of the same shape.
+
+    mask (H, W) uint8: 0 seafloor, 1 target, 2 shadow (a render set's masks/).
+    """
+    if render01.shape != mask.shape or render01.shape != floor01.shape:
+        raise SasmiError(f"on_floor: render {render01.shape}, mask {mask.shape} and floor {floor01.shape} differ")
+    render, floor = render01.astype(np.float64), floor01.astype(np.float64)
+    if not (mask > 0).any() or not (mask == 0).any():
+        return floor.astype(np.float32)
+    ratio = render / _level_by_column(render, mask == 0)[None]        # the render against its own floor
+    floor_level = _level_by_column(floor, np.ones_like(mask, bool))[None]
+    laid = floor_level * ratio                                         # the same ratios on the real floor
+    if (mask == 1).any():
+        # a rocky real floor has a brighter tail than the render's: lift the highlight with it, as far
+        # above the tail as it stood in the render (else `sasmi evaluate` counts it lost)
+        def tail(x: np.ndarray, where: np.ndarray) -> float:
+            return float(np.percentile(ndimage.gaussian_filter(x, SMOOTH)[where], 99))
+        lift = tail(floor / floor_level, np.ones_like(mask, bool)) / max(tail(ratio, mask == 0), 1e-6)
+        laid = np.where(mask == 1, laid * max(lift, 1.0), laid)
+    region = ndimage.binary_dilation(mask > 0, iterations=FEATHER)
+    weight = np.maximum(ndimage.gaussian_filter(region.astype(np.float64), 1.0), region)
+    out = np.clip((1.0 - weight) * floor + weight * laid, 0.0, 1.0)
+    if (mask == 1).any():
+        wanted, got = _visibility(render, mask), _visibility(out, mask)
+        if got < wanted:
+            out = np.where(mask == 1, np.clip(out * wanted / got, 0.0, 1.0), out)
+    return out.astype(np.float32)
+
+
+def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targets: str | os.PathLike,
+                     out: str | os.PathLike, size: int, seed: int = 0) -> int:
+    """Write every chip of the render set `renders` on a real floor into `out` (a render set, labels carried).
+
+    Each chip draws its floor from `matching_floors(floors, targets)` and flips it up-down half of
+    the time (along track has no direction), from a stream seeded by (seed, chip); returns the count.
+    """
+    from sasmi.gan.translate import carry_labels
+    from sasmi.masks import read_mask
+    from sasmi.preprocess import load_image
+
+    renders, out = Path(renders), Path(out)
+    if not list_images(floors):
+        raise SasmiError(f"--floors {floors}: no image (png, jpg, tif, tiff, npy) in it")
+    paths = list_images(renders / "images")
+    if not paths or not (renders / "masks").is_dir():
+        raise SasmiError(f"{renders}: not a render set (images/ and masks/)")
+    choices = matching_floors(floors, targets, size)
+    for index, path in enumerate(paths):
+        rng = np.random.default_rng([seed, index])
+        floor = load_image(choices[rng.integers(len(choices))], size)
+        if rng.random() < 0.5:
+            floor = floor[::-1]
+        render = load_image(path, size)
+        mask = read_mask(renders / "masks" / f"{path.stem}.png")
+        if mask.shape != render.shape:
+            raise SasmiError(f"{renders / 'masks' / path.stem}.png: mask {mask.shape} against image {render.shape}")
+        write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor))
+    carry_labels(renders, out)
+    return len(paths)

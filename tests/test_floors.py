@@ -1,0 +1,66 @@
+"""Renders on real floors: the floor outside the target, the render's ratios inside, a visible highlight,
+floors chosen by their statistics (`sasmi fit --floors` end to end: tests/test_pipeline.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sasmi.floors import matching_floors, on_floor
+from sasmi.images import write_gray
+
+SIZE = 64
+
+
+def _scene(floor_level: float = 0.3):
+    """A flat render (floor 0.3) with a target at 3x the floor and a shadow at 0.1 of it, and its mask."""
+    mask = np.zeros((SIZE, SIZE), np.uint8)
+    mask[28:34, 20:24] = 1
+    mask[28:34, 24:44] = 2
+    render = np.full((SIZE, SIZE), floor_level, np.float32)
+    render[mask == 1] = 3 * floor_level
+    render[mask == 2] = 0.1 * floor_level
+    return render, mask
+
+
+def _speckle(level: float, seed: int, looks: float = 4.0) -> np.ndarray:
+    return np.random.default_rng(seed).gamma(looks, level / looks, (SIZE, SIZE)).astype(np.float32)
+
+
+def test_on_floor_keeps_the_real_floor_and_the_renders_ratios():
+    render, mask = _scene()
+    floor = _speckle(0.2, 0)
+    out = on_floor(render, mask, floor)
+    far = np.ones_like(mask, bool)
+    far[20:42, 12:52] = False
+    np.testing.assert_array_equal(out[far], floor[far])  # away from the target: the real floor untouched
+    level = np.median(floor)
+    assert np.median(out[mask == 2]) / level == pytest.approx(0.1, rel=0.25)  # the shadow's 0.1 of the floor
+    assert np.median(out[mask == 1]) / level > 2.5                            # the highlight's 3x or more
+
+
+def test_on_floor_lifts_the_highlight_above_a_rocky_floors_bright_tail():
+    """Without the lift the target sits under the floor's bright tail: `sasmi evaluate` counts it lost."""
+    render, mask = _scene()
+    floor = _speckle(0.2, 1)
+    for r in range(2, SIZE, 10):  # rocks: 3 x 3 px at full scale, brighter than the target's 3x the floor
+        for c in range(2, SIZE, 10):
+            floor[r:r + 3, c:c + 3] = 1.0
+    out = on_floor(render, mask, floor)
+    from scipy.ndimage import gaussian_filter
+
+    blurred = gaussian_filter(out.astype(np.float64), 1.5)
+    assert blurred[mask == 1].max() > np.percentile(blurred[mask == 0], 99)
+
+
+def test_matching_floors_picks_the_targets_sonar(tmp_path):
+    """Target chips and one floor folder share dark, fine speckle; a second sonar's floors are bright ripples."""
+    targets, floors = tmp_path / "targets", tmp_path / "floors"
+    cols = np.arange(SIZE)[None, :]
+    for i in range(6):
+        render, _ = _scene()
+        write_gray(targets / f"t{i}.png", _speckle(0.15, 10 + i) * (render / 0.3))
+        write_gray(floors / f"same_{i}.png", _speckle(0.15, 20 + i))
+        ripples = 0.55 + 0.3 * np.sin(2 * np.pi * cols / 8.0 + i)
+        write_gray(floors / f"other_{i}.png", _speckle(1.0, 30 + i, looks=20.0) * ripples)
+    picks = matching_floors(floors, targets, SIZE)
+    assert len(picks) == 6 and all(p.name.startswith("same_") for p in picks), [p.name for p in picks]
