@@ -227,7 +227,7 @@ def _temp_files(out: Path) -> dict[int, list[Path]]:
 
 
 # (B, H, W) in [0, 1] and the B chips' scene indices (the seeds of anything random) -> (B, H, W) in [0, 1]
-Transform = Callable[[np.ndarray, list[int]], np.ndarray]
+Transform = Callable[[np.ndarray, np.ndarray, list[int]], np.ndarray]  # (images, masks, scene indices) -> images
 
 
 def render_set(job: RenderJob, transform: Transform | None = None, identity: dict | None = None,
@@ -268,6 +268,7 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
             while chunk := list(itertools.islice(stream, batch if transform else 1)):
                 if transform is not None:
                     images = transform(np.stack([rendered.image for _, rendered in chunk]),  # (B, H, W) in [0, 1]
+                                       np.stack([rendered.mask for _, rendered in chunk]),   # (B, H, W) uint8
                                        [index for index, _ in chunk])
                     for (index, rendered), image in zip(chunk, images):
                         write_one(job.out, index, image, rendered, job.image_format)

@@ -93,12 +93,22 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
     return out.astype(np.float32)
 
 
+def floor_for(choices: list[Path], seed: int, index: int, size: int) -> np.ndarray:
+    """(size, size) in [0, 1]: chip `index`'s floor, drawn from `choices` and flipped up-down half the time
+    (along track has no direction), from a stream seeded by (seed, index) alone: the same in any batch."""
+    from sasmi.preprocess import load_image
+
+    rng = np.random.default_rng([seed, index])
+    floor = load_image(choices[rng.integers(len(choices))], size)
+    return floor[::-1] if rng.random() < 0.5 else floor
+
+
 def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targets: str | os.PathLike,
                      out: str | os.PathLike, size: int, seed: int = 0) -> int:
     """Write every chip of the render set `renders` on a real floor into `out` (a render set, labels carried).
 
-    Each chip draws its floor from `matching_floors(floors, targets)` and flips it up-down half of
-    the time (along track has no direction), from a stream seeded by (seed, chip); returns the count.
+    Chip i (the i-th image) takes `floor_for(matching_floors(floors, targets), seed, i)`, as
+    `sasmi generate --floors` does for scene i; returns the count.
     """
     from sasmi.gan.translate import carry_labels
     from sasmi.masks import read_mask
@@ -112,10 +122,7 @@ def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targ
         raise SasmiError(f"{renders}: not a render set (images/ and masks/)")
     choices = matching_floors(floors, targets, size)
     for index, path in enumerate(paths):
-        rng = np.random.default_rng([seed, index])
-        floor = load_image(choices[rng.integers(len(choices))], size)
-        if rng.random() < 0.5:
-            floor = floor[::-1]
+        floor = floor_for(choices, seed, index, size)
         render = load_image(path, size)
         mask = read_mask(renders / "masks" / f"{path.stem}.png")
         if mask.shape != render.shape:

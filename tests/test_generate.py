@@ -87,3 +87,41 @@ def test_generate_defaults_to_the_generators_size_and_takes_a_checkpoint_path(tm
     assert main(["generate", PRESET, "--generator", str(generator_runs[0]), "--checkpoint", str(checkpoint),
                  "--out", str(out), "--count", "1", "--spp", "2"]) == 0
     assert json.loads((out / "run.json").read_text())["size"] == 32  # the generator was trained at 32 px
+
+
+def test_generate_on_floors_makes_what_fit_translates(tmp_path, generator_runs, render_set):
+    """`sasmi generate --floors` lays scene i on the floor `sasmi fit --floors` gives chip i, then translates."""
+    from sasmi.floors import onto_real_floors
+    from sasmi.gan.generator import load_generator
+    from sasmi.gan.translate import translate
+    from sasmi.images import read_gray, write_gray
+
+    rng = np.random.default_rng(0)
+    floors, targets = tmp_path / "floors", tmp_path / "targets"
+    for i in range(4):
+        write_gray(floors / f"f{i}.png", rng.gamma(4.0, 0.4 / 4.0, (32, 32)) * np.linspace(0.6, 1.4, 32)[None])
+        target = rng.gamma(4.0, 0.3 / 4.0, (32, 32))
+        target[14:18, 12:15], target[14:18, 15:24] = 0.8, 0.02
+        write_gray(targets / f"t{i}.png", target)
+    out = tmp_path / "gen"
+    assert main(["generate", PRESET, "--generator", str(generator_runs[0]), "--out", str(out), "--count", "4",
+                 "--size", "32", "--spp", "4", "--floors", str(floors), "--real", str(targets)]) == 0
+
+    on_floors = tmp_path / "on_floors"
+    onto_real_floors(render_set, floors, targets, on_floors, 32, seed=0)
+    laid = np.stack([read_gray(on_floors / "images" / f"{i:06d}.png") for i in range(4)])
+    expected = translate(load_generator(generator_runs[0], CPU), laid)
+    generated = np.stack([read_gray(out / "images" / f"{i:06d}.png") for i in range(4)])
+    # fit lays the 8-bit render and translates the 8-bit composite, generate the floats: rounding apart
+    difference = np.abs(generated - expected)
+    assert difference.mean() < 1 / 255 and np.percentile(difference, 99) < 4 / 255
+    plain = np.stack([read_gray(render_set / "images" / f"{i:06d}.png") for i in range(4)])
+    off_floor = np.abs(generated - translate(load_generator(generator_runs[0], CPU), plain))
+    assert off_floor.mean() > 5 / 255  # the floors are not the renders'
+
+
+def test_generate_floors_without_real_is_one_line(tmp_path, capsys):
+    assert main(["generate", PRESET, "--generator", str(tmp_path / "g"), "--out", str(tmp_path / "o"),
+                 "--floors", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--floors and --real" in err and not (tmp_path / "o").exists()

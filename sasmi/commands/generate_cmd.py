@@ -24,14 +24,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                             "was trained at; another size is resampled to it and back)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
     p.add_argument("--workers", type=int, default=1, help="render processes (default 1)")
+    p.add_argument("--floors", metavar="DIR",
+                   help="lay each render's target and shadow on a real seafloor chip first, as `sasmi fit --floors` "
+                        "did for the generator it trained (needs --real)")
+    p.add_argument("--real", metavar="DIR", help="with --floors: the real target chips the floors are matched to "
+                                                  "(the --real of that `sasmi fit`)")
     add_translation_flags(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from sasmi.dataset import RenderJob, render_set
+    from sasmi.errors import SasmiError
+    from sasmi.floors import floor_for, matching_floors, on_floor
+    from sasmi.images import list_images
     from sasmi.scene import load_preset
 
+    if bool(args.floors) != bool(args.real):
+        raise SasmiError("--floors and --real: give both (the floors are matched to the real target chips) or neither")
+    for flag, folder in (("--floors", args.floors), ("--real", args.real)):
+        if folder and not list_images(folder):
+            raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
     preset = load_preset(args.preset)
     generator = generator_from(args)
     from sasmi.gan.translate import translate
@@ -39,9 +54,17 @@ def run(args: argparse.Namespace) -> int:
                     size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
     identity = {"generator": str(Path(args.generator).resolve()),
                 "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
-    # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
-    render_set(job, transform=lambda images, indices: translate(generator, images, args.batch,
-                                                                 seeds=[args.seed * 2 ** 32 + i for i in indices]),
-               identity=identity, batch=args.batch)
+    floors = matching_floors(args.floors, args.real, job.size) if args.floors else []
+    if floors:
+        identity["floors"] = sorted({str(Path(f).resolve()) for f in floors})
+
+    def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
+        if floors:
+            images = np.stack([on_floor(image, mask, floor_for(floors, args.seed, i, job.size))
+                               for image, mask, i in zip(images, masks, indices)])
+        # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
+        return translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
+
+    render_set(job, transform=transform, identity=identity, batch=args.batch)
     print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}")
     return 0
