@@ -1,7 +1,11 @@
-"""Render | translation | nearest real chip (in φ) for a dozen chips: the README's GAN figure.
+"""Render | translation | nearest real chip (in φ) for a dozen chips: the README's GAN figures.
 
     .venv/bin/python benchmarks/triptych.py --renders RUN/renders --translated RUN/translated \
-        --real runs/split/validation/targets --phi RUN/phi --out docs/figures/sasgan_triptych.png [--count 12]
+        --real runs/split/validation/targets --phi RUN/phi --out docs/figures/sasgan_triptych.png [--count 12] \
+        [--on-floors RUN/on_floors]
+
+With --on-floors (a `sasmi fit` run with real floors) a row between render and translation shows
+the render on its real floor, the GAN's input.
 """
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ def main() -> None:
     ap.add_argument("--phi", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--count", type=int, default=12)
+    ap.add_argument("--on-floors", type=Path, help="the renders on real floors (RUN/on_floors), shown as a row")
     args = ap.parse_args()
 
     import matplotlib
@@ -40,11 +45,15 @@ def main() -> None:
     d = ((translated.phi[picks, None, :] - real.phi[None, :, :]) ** 2).sum(-1)  # (count, N_real)
     nearest = d.argmin(1)
 
-    fig, axes = plt.subplots(3, args.count, figsize=(1.3 * args.count, 4.1))
+    on_floors = {p.stem: p for p in list_images(args.on_floors)} if args.on_floors else {}
+    rows = 3 + bool(on_floors)
+    fig, axes = plt.subplots(rows, args.count, figsize=(1.3 * args.count, 1.37 * rows))
     for col, (i, j) in enumerate(zip(picks, nearest)):
-        render = read_gray(renders[names[i]])
-        for row, (image, title) in enumerate(((render, "render"), (translated.image(i), "translation"),
-                                              (real.image(j), "nearest real"))):
+        shown = [(read_gray(renders[names[i]]), "render")]
+        if on_floors:
+            shown.append((read_gray(on_floors[names[i]]), "on a real floor"))
+        shown += [(translated.image(i), "translation"), (real.image(j), "nearest real")]
+        for row, (image, title) in enumerate(shown):
             ax = axes[row, col]
             ax.imshow(image, cmap="gray", vmin=0, vmax=1)
             ax.set_xticks([])

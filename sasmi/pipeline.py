@@ -42,7 +42,8 @@ class FitPlan:
     seed: int = 0
     gan: str = "real_levels"  # SAS GAN settings: a shipped recipe's name (gan/recipes/) or a TOML file
     phi: str = ""  # an existing autoencoder run to use instead of training RUN/phi
-    floors: str = ""  # real seafloor chips the renders' targets are laid on (RUN/on_floors); "" keeps the renders'
+    floors: str | None = None  # real seafloor chips the renders' targets are laid on (RUN/on_floors);
+    #                            "" keeps the renders' own floors; None: phi_real's seafloor/ when it has one
 
     def identity(self) -> dict:
         """What a rerun must share with the run it continues (the budget may grow)."""
@@ -281,4 +282,12 @@ def recipes_folder() -> Path:
 
 
 def with_defaults(plan: FitPlan) -> FitPlan:
-    return replace(plan, phi_real=plan.phi_real or plan.real, validation=plan.validation or plan.real)
+    phi_real = plan.phi_real or plan.real
+    return replace(plan, phi_real=phi_real, validation=plan.validation or plan.real,
+                   floors=default_floors(phi_real) if plan.floors is None else plan.floors)
+
+
+def default_floors(phi_real: str) -> str:
+    """The seafloor chips beside the targets that φ learns from (`sasmi split`'s train/seafloor/), or ""."""
+    seafloor = Path(phi_real) / "seafloor"
+    return str(seafloor) if seafloor.is_dir() and list_images(seafloor) else ""

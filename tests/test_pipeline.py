@@ -109,3 +109,23 @@ def test_fit_refuses_an_empty_floors_folder_before_writing(tmp_path, capsys):
                  "--floors", str(empty)]) == 2
     err = capsys.readouterr().err
     assert f"--floors {empty}: no image" in err and "Traceback" not in err and not out.exists()
+
+
+def test_fit_takes_the_phi_chips_seafloor_as_floors_unless_told_not_to(tmp_path):
+    from sasmi.cli import build_parser
+    from sasmi.pipeline import FitPlan, with_defaults
+
+    train = tmp_path / "train"
+    _chips(train / "targets", 2, 0), _chips(train / "seafloor", 2, 1)
+    base = ["fit", "--real", str(train / "targets"), "--out", "run"]
+
+    def plan(*argv):
+        args = build_parser().parse_args([*base, *argv])
+        return with_defaults(FitPlan(real=args.real, out=args.out, phi_real=args.phi_real,
+                                     validation=args.validation, floors=args.floors))
+
+    assert plan("--phi-real", str(train)).floors == str(train / "seafloor")  # `sasmi split`'s layout
+    assert plan("--phi-real", str(train), "--no-floors").floors == ""
+    assert plan("--phi-real", str(train), "--floors", str(tmp_path / "mine")).floors == str(tmp_path / "mine")
+    assert plan().floors == ""  # --real alone: a targets folder has no seafloor/
+    assert "floors" not in plan("--no-floors").identity()  # runs from before --floors still resume

@@ -8,8 +8,8 @@ from sasmi.commands.common import add_device, add_threads, apply_threads, resolv
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="one command from real chips to a trained SAS GAN and its realism report",
-                       description="Trains φ into RUN/phi, renders the preset into RUN/renders (with --floors, "
-                                   "lays their targets on real floors into RUN/on_floors), trains the SAS GAN "
+                       description="Trains φ into RUN/phi, renders the preset into RUN/renders, lays their targets on real "
+                                   "seafloor chips into RUN/on_floors (see --floors), trains the SAS GAN "
                                    "into RUN/sasgan within the time budget, translates into RUN/translated and "
                                    "writes RUN/report/ (sasmi evaluate's metrics.json). Rerun to resume; raise "
                                    "--minutes to train on.")
@@ -28,9 +28,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "a real chip's gray levels after translation; baseline) or a TOML file of them")
     p.add_argument("--phi", metavar="RUN", default="",
                    help="an autoencoder run to use instead of training one (e.g. one φ for several recipes)")
-    p.add_argument("--floors", metavar="DIR", default="",
-                   help="real seafloor chips (of the same sonar as --real; others are passed over): the renders' "
-                        "targets and shadows are laid on them (RUN/on_floors) before the GAN (docs/gan.md, *Real floors*)")
+    floors = p.add_mutually_exclusive_group()
+    floors.add_argument("--floors", metavar="DIR",
+                        help="real seafloor chips (of the same sonar as --real; chips unlike its floors are passed "
+                             "over): the renders' targets and shadows are laid on them (RUN/on_floors) before the "
+                             "GAN (docs/gan.md, *Real floors*). Default: --phi-real's seafloor/ folder, if it has one")
+    floors.add_argument("--no-floors", dest="floors", action="store_const", const="",
+                        help="keep the renders' own floors")
     add_device(p)
     add_threads(p)
     p.set_defaults(run=run)
