@@ -57,6 +57,11 @@ def _level_by_column(image01: np.ndarray, where: np.ndarray) -> np.ndarray:
     return np.maximum(ndimage.uniform_filter1d(column, size=9, mode="nearest"), 1.0 / 255.0)
 
 
+def _tail(image: np.ndarray, where: np.ndarray) -> float:
+    """The 99th percentile of the blurred image over `where`."""
+    return float(np.percentile(ndimage.gaussian_filter(image, SMOOTH)[where], 99))
+
+
 def _visibility(image01: np.ndarray, mask: np.ndarray) -> float:
     """The target's blurred peak over the blurred floor's 99th percentile: `sasmi evaluate` loses a target below 1."""
     blurred = ndimage.gaussian_filter(image01, SMOOTH)
@@ -79,9 +84,7 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
     if (mask == 1).any():
         # a rocky real floor has a brighter tail than the render's: lift the highlight with it, as far
         # above the tail as it stood in the render (else `sasmi evaluate` counts it lost)
-        def tail(x: np.ndarray, where: np.ndarray) -> float:
-            return float(np.percentile(ndimage.gaussian_filter(x, SMOOTH)[where], 99))
-        lift = tail(floor / floor_level, np.ones_like(mask, bool)) / max(tail(ratio, mask == 0), 1e-6)
+        lift = _tail(floor / floor_level, np.ones_like(mask, bool)) / max(_tail(ratio, mask == 0), 1e-6)
         laid = np.where(mask == 1, laid * max(lift, 1.0), laid)
     region = ndimage.binary_dilation(mask > 0, iterations=FEATHER)
     weight = np.maximum(ndimage.gaussian_filter(region.astype(np.float64), 1.0), region)

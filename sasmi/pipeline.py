@@ -3,9 +3,9 @@
 Stages, each into its own folder of RUN (ordinary folders the other commands accept):
     phi         the φ autoencoder on the φ chips                 (sasmi train autoencoder)
     renders     the preset rendered at the training size        (sasmi render)
-    on_floors   with --floors: the renders' targets on real floors (sasmi.floors)
+    on_floors   their targets on real seafloor chips (sasmi.floors; the stage `floors`, skipped with --no-floors)
     sasgan      the SAS GAN, trained until its share of time ends (sasmi train sasgan)
-    translated  the renders through the generator                (sasmi translate)
+    translated  on_floors (or the renders) through the generator (sasmi translate)
     report      φ-FID/KID/P-R, statistics, target preservation   (sasmi evaluate)
 
 RUN/fit.json records the plan, the seconds each stage has used and which stages are
@@ -50,7 +50,7 @@ class FitPlan:
         d = asdict(self)
         d.pop("minutes")
         if not d["floors"]:
-            d.pop("floors")  # runs from before --floors still resume
+            d.pop("floors")  # runs from before --floors resume with --no-floors
         return d
 
     @property
