@@ -23,7 +23,7 @@ from scipy import ndimage
 
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, write_gray
-from sasmi.stats import chip_statistics
+from sasmi.stats import chip_statistics, floor_level
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor
 FLOOR_STATISTICS = ("p50", "p99", "looks", "acf_range", "acf_track", "periodicity")
@@ -48,15 +48,6 @@ def matching_floors(floors: str | os.PathLike, targets: str | os.PathLike, size:
     return [paths[i] for i in np.argmin(distance, axis=1)]
 
 
-def _level_by_column(image01: np.ndarray, where: np.ndarray) -> np.ndarray:
-    """(W,) the floor level of each range column over `where`, smoothed along range (sasmi.stats' floor level)."""
-    counts = where.sum(axis=0)
-    column = np.array([np.median(image01[where[:, c], c]) if counts[c] > 8 else np.nan
-                       for c in range(image01.shape[1])])
-    column = np.where(np.isfinite(column), column, np.nanmedian(column) if np.isfinite(column).any() else 1.0)
-    return np.maximum(ndimage.uniform_filter1d(column, size=9, mode="nearest"), 1.0 / 255.0)
-
-
 def _tail(image: np.ndarray, where: np.ndarray) -> float:
     """The 99th percentile of the blurred image over `where`."""
     return float(np.percentile(ndimage.gaussian_filter(image, SMOOTH)[where], 99))
@@ -78,13 +69,13 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
     render, floor = render01.astype(np.float64), floor01.astype(np.float64)
     if not (mask > 0).any() or not (mask == 0).any():
         return floor.astype(np.float32)
-    ratio = render / _level_by_column(render, mask == 0)[None]        # the render against its own floor
-    floor_level = _level_by_column(floor, np.ones_like(mask, bool))[None]
-    laid = floor_level * ratio                                         # the same ratios on the real floor
+    ratio = render / floor_level(render, mask == 0)[None]  # the render against its own floor
+    level = floor_level(floor)[None]
+    laid = level * ratio                                   # the same ratios on the real floor
     if (mask == 1).any():
         # a rocky real floor has a brighter tail than the render's: lift the highlight with it, as far
         # above the tail as it stood in the render (else `sasmi evaluate` counts it lost)
-        lift = _tail(floor / floor_level, np.ones_like(mask, bool)) / max(_tail(ratio, mask == 0), 1e-6)
+        lift = _tail(floor / level, np.ones_like(mask, bool)) / max(_tail(ratio, mask == 0), 1e-6)
         laid = np.where(mask == 1, laid * max(lift, 1.0), laid)
     region = ndimage.binary_dilation(mask > 0, iterations=FEATHER)
     weight = np.maximum(ndimage.gaussian_filter(region.astype(np.float64), 1.0), region)

@@ -143,9 +143,10 @@ def fit(plan: FitPlan, device) -> Path:
     check_size(plan.size)
     preset = load_preset(plan.preset)  # a bad preset and a bad recipe fail before anything is written
     gan_settings = sasgan_settings(plan.gan)
-    folders = (("--real", plan.real), ("--phi-real", plan.phi_real), ("--validation", plan.validation),
-               *((("--floors", plan.floors),) if plan.floors else ()))
-    for flag, folder in folders:
+    folders = {"--real": plan.real, "--phi-real": plan.phi_real, "--validation": plan.validation}
+    if plan.floors:
+        folders["--floors"] = plan.floors
+    for flag, folder in folders.items():
         if not list_images(folder):
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
     state = State(plan)

@@ -71,9 +71,20 @@ class Target:
     shadow_pixels: np.ndarray             # (H, W) bool
 
 
-def floor_level(image01: np.ndarray) -> np.ndarray:
-    """(W,) the seafloor level of each range column: its median, smoothed along range."""
-    level = ndimage.uniform_filter1d(np.median(image01, axis=0), size=9, mode="nearest")
+def floor_level(image01: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
+    """(W,) the seafloor level of each range column: its median, smoothed along range.
+
+    With `where` (H, W) bool, the median of each column's pixels there; a column with 8 or fewer
+    takes the median of the other columns' levels.
+    """
+    if where is None:
+        column = np.median(image01, axis=0)
+    else:
+        counts = where.sum(axis=0)
+        column = np.array([np.median(image01[where[:, c], c]) if counts[c] > 8 else np.nan
+                           for c in range(image01.shape[1])])
+        column = np.where(np.isfinite(column), column, np.nanmedian(column) if np.isfinite(column).any() else 1.0)
+    level = ndimage.uniform_filter1d(column, size=9, mode="nearest")
     return np.maximum(level, 1.0 / 255.0)
 
 
