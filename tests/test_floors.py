@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sasmi.floors import matching_floors, on_floor
+from sasmi.floors import fresh_speckle, matching_floors, on_floor
 from sasmi.images import write_gray
 
 SIZE = 64
@@ -52,6 +52,17 @@ def test_on_floor_lifts_the_highlight_above_a_rocky_floors_bright_tail():
     assert blurred[mask == 1].max() > np.percentile(blurred[mask == 0], 99)
 
 
+def test_on_floor_lifts_a_faint_highlight_out_of_the_speckle():
+    """A render whose target peaks under its floor's bright tail is lifted to VISIBLE (1.1 x the tail) on a real floor."""
+    from scipy.ndimage import gaussian_filter
+
+    render, mask = _scene()
+    render = _speckle(0.3, 4, looks=2.0) * np.where(mask == 1, 1.2, render / 0.3)  # target 1.2x a rough floor
+    out = on_floor(np.clip(render, 0, 1), mask, _speckle(0.2, 5, looks=2.0))
+    blurred = gaussian_filter(out.astype(np.float64), 1.5)
+    assert blurred[mask == 1].max() > 1.09 * np.percentile(blurred[mask == 0], 99)
+
+
 def test_matching_floors_picks_the_targets_sonar(tmp_path):
     """Target chips and one floor folder share dark, fine speckle; a second sonar's floors are bright ripples."""
     targets, floors = tmp_path / "targets", tmp_path / "floors"
@@ -64,3 +75,19 @@ def test_matching_floors_picks_the_targets_sonar(tmp_path):
         write_gray(floors / f"other_{i}.png", _speckle(1.0, 30 + i, looks=20.0) * ripples)
     picks = matching_floors(floors, targets, SIZE)
     assert len(picks) == 6 and all(p.name.startswith("same_") for p in picks), [p.name for p in picks]
+
+
+def test_fresh_speckle_keeps_the_seabed_and_not_the_pixels():
+    """A floor with bands along range and a bright patch: the same seabed, other speckle (the copying detector's pixels)."""
+    from scipy.ndimage import gaussian_filter
+
+    cols, rows = np.arange(SIZE)[None, :], np.arange(SIZE)[:, None]
+    seabed = 0.15 + 0.2 * (cols / SIZE) + 0.15 * ((rows - 20) ** 2 + (cols - 40) ** 2 < 100)
+    floor = np.clip(_speckle(1.0, 3) * seabed, 0, 1).astype(np.float32)
+    fresh = fresh_speckle(floor, np.random.default_rng(0))
+    assert fresh.shape == floor.shape and fresh.min() >= 0 and fresh.max() <= 1
+    blur = lambda x: gaussian_filter(x.astype(np.float64), 4.0)
+    assert np.abs(blur(fresh) - blur(floor)).mean() < 0.1 * blur(floor).mean()      # the bands and the patch stay
+    speckle, new = floor / seabed - 1, fresh / seabed - 1
+    assert abs(np.corrcoef(speckle.ravel(), new.ravel())[0, 1]) < 0.2               # the pixels are not the chip's
+    assert new.std() == pytest.approx(speckle.std(), rel=0.2)                       # at the chip's speckle strength
