@@ -91,7 +91,7 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
         wanted = max(_visibility(render, mask), VISIBLE)
         for _ in range(LIFTS):
             got = _visibility(out, mask)
-            if got >= wanted:
+            if got >= wanted or got <= 0.0:  # a black target cannot be scaled up
                 break
             out = np.where(mask == 1, np.clip(out * wanted / got, 0.0, 1.0), out)
     return out.astype(np.float32)
