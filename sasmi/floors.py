@@ -23,13 +23,14 @@ import numpy as np
 from scipy import ndimage
 
 from sasmi.errors import SasmiError
+from sasmi.eval.config import PreservationConfig
 from sasmi.images import list_images, write_gray
 from sasmi.stats import chip_statistics, floor_level
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor
 FLOOR_STATISTICS = ("p50", "p99", "looks", "acf_range", "acf_track", "periodicity")
 FEATHER = 2          # px the target and shadow masks grow by before they are blended in
-SMOOTH = 1.5         # px: the blur under which `sasmi evaluate` looks for a highlight
+LOST = PreservationConfig()  # `sasmi evaluate`'s lost target: nothing above the blurred floor's bright percentile
 VISIBLE = 1.1        # the least `_visibility` of a composite's highlight (see on_floor)
 LIFTS = 4            # lifts of the highlight towards it: the blur mixes the unlifted floor into the peak
 SEABED = 4.0         # px: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
@@ -53,14 +54,14 @@ def matching_floors(floors: str | os.PathLike, targets: str | os.PathLike, size:
 
 
 def _tail(image: np.ndarray, where: np.ndarray) -> float:
-    """The 99th percentile of the blurred image over `where`."""
-    return float(np.percentile(ndimage.gaussian_filter(image, SMOOTH)[where], 99))
+    """The bright percentile of the blurred image over `where`, as `sasmi evaluate` takes it."""
+    return float(np.percentile(ndimage.gaussian_filter(image, LOST.smooth)[where], LOST.bright_percentile))
 
 
 def _visibility(image01: np.ndarray, mask: np.ndarray) -> float:
-    """The target's blurred peak over the blurred floor's 99th percentile: `sasmi evaluate` loses a target below 1."""
-    blurred = ndimage.gaussian_filter(image01, SMOOTH)
-    return float(blurred[mask == 1].max() / max(np.percentile(blurred[mask == 0], 99), 1e-6))
+    """The target's blurred peak over the blurred floor's bright percentile: `sasmi evaluate` loses a target below 1."""
+    blurred = ndimage.gaussian_filter(image01, LOST.smooth)
+    return float(blurred[mask == 1].max() / max(np.percentile(blurred[mask == 0], LOST.bright_percentile), 1e-6))
 
 
 def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.ndarray:
