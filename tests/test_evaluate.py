@@ -159,6 +159,35 @@ def test_recall_does_not_fall_as_more_chips_are_generated():
     assert precision.value > 0.9 and recall.value < 0.2
 
 
+def test_coverage_finds_the_real_chips_no_generated_chip_is_near():
+    rng = np.random.default_rng(11)
+    covered, missed = rng.standard_normal((30, 8)), rng.standard_normal((10, 8)) + 12  # a mode the set lacks
+    generated = rng.standard_normal((200, 8))
+    cover = ev.real_coverage(np.concatenate([covered, missed]), generated, k=3, n=20)
+    assert cover.shape == (40,) and cover[:30].mean() > 0.7 and np.all(cover[30:] == 0)
+    _, recall = ev.precision_recall_matched(np.concatenate([covered, missed]), generated, k=3, n=200)
+    assert abs(cover.mean() - recall.value) < 0.05  # its mean is the realism table's recall
+
+
+def test_coverage_report_names_the_missed_chips(tmp_path):
+    from pathlib import Path
+
+    from sasmi.eval.config import EvalConfig
+    from sasmi.eval.coverage import FIGURE, coverage_metrics
+    from sasmi.eval.features import FeatureSet
+
+    rng = np.random.default_rng(12)
+    phi = np.concatenate([rng.standard_normal((12, 4)), rng.standard_normal((3, 4)) + 9])  # chips 12-14 missed
+    real = FeatureSet("real", Path("real"), rng.integers(0, 255, (15, 8, 8), dtype=np.uint8), phi,
+                      tuple(f"chip{i}.png" for i in range(15)))
+    made = FeatureSet("made", Path("made"), rng.integers(0, 255, (60, 8, 8), dtype=np.uint8),
+                      rng.standard_normal((60, 4)))
+    c = coverage_metrics(real, [made], EvalConfig(least_covered_shown=3, coverage_draws=10), tmp_path)["made"]
+    assert {x["chip"] for x in c["least"]} == {"chip12.png", "chip13.png", "chip14.png"} and c["never"] == 3
+    assert all(x["covered"] == 0 and x["nearest"].startswith("#") for x in c["least"])
+    assert (tmp_path / FIGURE).is_file()
+
+
 def test_nearest_and_copy_statistics():
     rng = np.random.default_rng(6)
     real = rng.standard_normal((50, 8))

@@ -91,7 +91,7 @@ def test_report_from_a_trained_run(data, capsys):
     # without a terminal (no progress bars) each stage still says one line
     stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("sasmi evaluate: [")]
     assert [s.split(":")[0] for s in stages] == ["φ of real", "φ of renders", "φ of shifted", "φ of floor", "realism",
-                                                 "copying detector", "t-SNE", "target preservation", "image statistics",
+                                                 "coverage", "copying detector", "t-SNE", "target preservation", "image statistics",
                                                  f"wrote {out}/report.md"]
 
     m = json.loads((out / "metrics.json").read_text())
@@ -109,6 +109,11 @@ def test_report_from_a_trained_run(data, capsys):
     # "shifted" keeps the real chips' gray levels; the flat renders' levels are far from them
     assert r["renders"]["gray_levels"] > 5 * max(r["shifted"]["gray_levels"], r["real→real"]["gray_levels"], 0.01)
     assert set(m["copying"]) == {"renders", "shifted", "floor"}
+    # coverage: its mean is the recall; the floors without targets leave more real chips uncovered
+    for name, c in m["coverage"].items():
+        assert abs(c["mean"] - r[name]["recall"]) < 0.25 and len(c["least"]) == 6, name
+    assert all(x["chip"].endswith(".png") and x["nearest"].endswith(".png") for x in m["coverage"]["floor"]["least"])
+    assert m["coverage"]["floor"]["mean"] < m["coverage"]["shifted"]["mean"]
     assert set(m["copying"]["floor"]) == {"pixel", "phi"}
     assert any("fewer than" in w for w in m["warnings"])
 
@@ -121,11 +126,11 @@ def test_report_from_a_trained_run(data, capsys):
     assert m["pose_sweep"] == {"skipped": "no --preset and --generator given"}
 
     report = (out / "report.md").read_text()
-    for text in ("## Realism in φ space", "| real→real | 12 + 12 |", "| renders | 12 |", "## Copying detector",
+    for text in ("## Realism in φ space", "| real→real | 12 + 12 |", "| renders | 12 |", "## Coverage", "## Copying detector",
                  "## t-SNE of φ", "## Target preservation", "Skipped (no masks/ and labels.jsonl): floor",
                  "## Pose sweeps", "Skipped: no --preset"):
         assert text in report, text
-    for figure in ("tsne.png", "nearest_distances.png", "neighbours_renders.png", "neighbours_floor.png",
+    for figure in ("tsne.png", "least_covered.png", "nearest_distances.png", "neighbours_renders.png", "neighbours_floor.png",
                    "preservation_renders.png", "preservation_shifted.png"):
         assert (out / figure).stat().st_size > 1000, figure
         assert f"]({figure})" in report, figure

@@ -5,6 +5,7 @@ One file per job, in pipeline order (clean-fid style: features, then metrics, th
 - cache.py         the real set's φ kept on disk between evaluations
 - metrics.py       FID (± bootstrap, matched-size ratio), KID, precision/recall: pure numpy on (N, D)
 - neighbours.py    nearest neighbours and the copying detector
+- coverage.py      recall chip by chip: the real chips a set misses
 - preservation.py  target preservation on labelled sets (masks + labels.jsonl)
 - sweeps.py        pose sweeps through a renderer and a generator
 - report.py        markdown, metrics.json and figures (text and plots only)

@@ -27,10 +27,15 @@ class FeatureSet:
     folder: Path
     images: np.ndarray  # (N, S, S) uint8: what the encoder saw, times 255, rounded
     phi: np.ndarray  # (N, D) float64
+    names: tuple[str, ...] = ()  # file names, in row order; empty for sets made in memory
 
     def __post_init__(self):
         assert self.images.dtype == np.uint8 and self.images.ndim == 3, (self.images.dtype, self.images.shape)
         assert self.phi.ndim == 2 and len(self.phi) == len(self.images), (self.phi.shape, self.images.shape)
+        assert not self.names or len(self.names) == len(self.phi), (len(self.names), self.phi.shape)
+
+    def name_of(self, i: int) -> str:
+        return self.names[i] if self.names else f"#{i}"
 
     def image(self, i: int) -> np.ndarray:
         """(S, S) float32 in [0, 1]."""
@@ -121,4 +126,4 @@ def load_set(name: str, folder: str | os.PathLike, encoder, batch: int = 32, cac
         phi = np.concatenate(blocks)
         if cached is not None:
             cache.write(cached, phi)
-    return FeatureSet(name, Path(folder), pixels, phi)
+    return FeatureSet(name, Path(folder), pixels, phi, tuple(p.name for p in paths))

@@ -224,6 +224,25 @@ def _precision_recall_estimates(reps: list[tuple[float, float]]) -> tuple[Estima
     return tuple(Estimate(float(values[:, i].mean()), float(spread[i])) for i in range(2))
 
 
+def real_coverage(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n: int = 100,
+                  seed: int = 0) -> np.ndarray:
+    """(N_real,) in [0, 1]: recall chip by chip. For each real sample, the share of `n` draws of
+    m = min(|real|, |fake|) generated samples whose k-NN balls hold it: the matched size of
+    `precision_recall_matched`, whose recall this averages to over the real set. 0: no draw of the
+    generated set has a sample near this real one."""
+    real = _as_features(feats_real, 1, "real_coverage (real)")
+    fake = _as_features(feats_fake, k + 1, "real_coverage (generated)")
+    m = min(len(real), len(fake))
+    if m == len(fake):
+        n = 1  # every draw would be the whole generated set
+    rng = np.random.default_rng(seed)
+    hits = np.zeros(len(real))
+    with one_blas_thread():
+        for _ in range(n):
+            hits += on_manifold(real, fake[rng.choice(len(fake), m, replace=False)], k)
+    return hits / n
+
+
 def on_manifold(points: np.ndarray, reference: np.ndarray, k: int = 3) -> np.ndarray:
     """(N,) bool: each point inside some reference sample's ball (radius: its distance to its k-th
     nearest reference neighbour); the mean over generated points against real ones is precision."""

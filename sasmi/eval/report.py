@@ -108,6 +108,19 @@ def copying_markdown(copying: dict, sets: Sequence[FeatureSet], cfg: EvalConfig)
     return "\n".join(lines)
 
 
+def coverage_markdown(coverage: dict, figure: str) -> str:
+    lines = ["Recall chip by chip: for each real chip, the share of draws of a set (at the real set's size, as "
+             "for recall) whose k-NN balls hold it. Its mean is the set's recall; a real chip at 0 looks like "
+             "none of the set's chips. The least covered real chips of each set, each beside its nearest chip "
+             "of the set in φ:", "",
+             "| set | mean coverage (recall) | real chips never covered | least covered |", "|---|---:|---:|---|"]
+    for name, c in coverage.items():
+        least = ", ".join(f"{x['chip']} ({x['covered']:.2f})" for x in c["least"][:3])
+        lines.append(f"| {name} | {c['mean']:.2f} | {c['never']} | {least} |")
+    lines += ["", f"![least covered real chips]({figure})", ""]
+    return "\n".join(lines)
+
+
 def statistics_markdown(rows: dict[str, dict]) -> str:
     """A table with one row per set and one column per statistic (in order of first appearance)."""
     columns = list(dict.fromkeys(key for row in rows.values() for key in row))

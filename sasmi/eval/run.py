@@ -1,4 +1,4 @@
-"""The evaluation as one call: φ of every folder, realism, copying, t-SNE and target
+"""The evaluation as one call: φ of every folder, realism, coverage, copying, t-SNE and target
 preservation, as a Report that `report.write_report` writes (what `sasmi evaluate` runs).
 
 Pose sweeps need a renderer and a generator and are added by the caller
@@ -21,10 +21,11 @@ from sasmi.errors import SasmiError
 from sasmi.eval import metrics
 from sasmi.eval.config import EvalConfig
 from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
+from sasmi.eval.coverage import FIGURE as COVERAGE_FIGURE, coverage_metrics
 from sasmi.eval.neighbours import copying_metrics
 from sasmi.eval.preservation import target_preservation
-from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, realism_markdown, statistics_markdown, \
-    tsne_figure
+from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, coverage_markdown, realism_markdown, \
+    statistics_markdown, tsne_figure
 from sasmi.labels import has_labels
 
 Log = Callable[[str], None]
@@ -95,7 +96,7 @@ def image_statistics(folders: dict[str, Path], statistics: Statistics) -> Report
 
 def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.PathLike,
              cfg: EvalConfig = EvalConfig(), log: Log = quiet) -> Report:
-    """Realism table, copying detector and t-SNE of `sets` against `real`; figures go to out_dir."""
+    """Realism table, coverage, copying detector and t-SNE of `sets` against `real`; figures go to out_dir."""
     out_dir = Path(out_dir)
     dim = real.phi.shape[1]
     warnings = [f"{s.name}: {len(s.phi)} images, fewer than φ's {dim} dimensions: its covariance is "
@@ -107,6 +108,8 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
     with metrics.one_blas_thread():
         log(f"realism: FID ({cfg.bootstrap} resamples), KID, precision/recall of {len(sets)} sets")
         realism = realism_table(real, sets, cfg)
+        log("coverage: the real chips each set covers least")
+        coverage = coverage_metrics(real, sets, cfg, out_dir)
         log("copying detector: nearest neighbours")
         copying = copying_metrics(real, sets, cfg, out_dir)
         log("t-SNE")
@@ -114,10 +117,11 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
     result = {"config": asdict(cfg), "phi_dim": dim, "image_size": int(real.images.shape[-1]),
               "real": {"dir": str(real.folder), "n": len(real.phi)},
               "sets": {s.name: {"dir": str(s.folder), "n": len(s.phi)} for s in sets},
-              "realism": realism, "copying": copying, "warnings": warnings}
+              "realism": realism, "coverage": coverage, "copying": copying, "warnings": warnings}
     notes = "".join(f"\n\n> **Warning.** {w}" for w in warnings)
     return Report(result, (
         Section("Realism in φ space", realism_markdown(realism, real) + notes),
+        Section("Coverage: the real chips each set misses", coverage_markdown(coverage, COVERAGE_FIGURE)),
         Section("Copying detector: nearest real images", copying_markdown(copying, sets, cfg)),
         tsne_section,
     ))

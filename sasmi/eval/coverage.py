@@ -1,0 +1,41 @@
+"""Which real chips a generated set leaves uncovered: recall, chip by chip.
+
+Recall says how much of the real set the generated chips cover; this says which real chips they
+miss. Each of the least covered is drawn beside the generated chip nearest it in φ, so that one
+sees what the set offers in its place (on the second split, `docs/gan.md`: shadows half the chip
+long, where the renders cast none so long).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from sasmi.eval import metrics
+from sasmi.eval.config import EvalConfig
+from sasmi.eval.features import FeatureSet
+from sasmi.eval.neighbours import nearest
+from sasmi.eval.report import mosaic_figure
+
+FIGURE = "least_covered.png"
+
+
+def coverage_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig, out_dir: Path) -> dict:
+    """Per set: the mean coverage (its recall), how many real chips no draw covers, and the least
+    covered chips with their nearest generated chip; one figure row per set."""
+    result, rows = {}, []
+    for i, s in enumerate(sets):
+        cover = metrics.real_coverage(real.phi, s.phi, cfg.pr_k, cfg.coverage_draws, cfg.seed + 1 + i)  # (N_real,)
+        least = np.argsort(cover, kind="stable")[:cfg.least_covered_shown]
+        idx, dist = nearest(real.phi[least], s.phi, 1)  # (L, 1) each
+        result[s.name] = {"mean": float(cover.mean()), "never": int(np.sum(cover == 0)),
+                          "least": [{"chip": real.name_of(j), "covered": float(cover[j]),
+                                     "nearest": s.name_of(g), "phi_distance": float(d)}
+                                    for j, g, d in zip(least, idx[:, 0], dist[:, 0])]}
+        rows.append([cell for j, g, d in zip(least, idx[:, 0], dist[:, 0])
+                     for cell in ((real.image(j), f"{real.name_of(j)[:18]}\ncovered {cover[j]:.2f}"),
+                                  (s.image(g), f"nearest of {s.name[:10]}\nφ {d:.1f}"))])
+    if rows:
+        mosaic_figure(rows, out_dir / FIGURE, gaps_before=range(2, len(rows[0]), 2))
+    return result
