@@ -21,6 +21,12 @@ from sasmi.eval.report import mosaic_figure
 FIGURE = "least_covered.png"
 
 
+def _short(name: str, width: int = 18) -> str:
+    """A caption that fits under a chip: the end of the stem, where chip names differ."""
+    stem = Path(name).stem
+    return stem if len(stem) <= width else "…" + stem[-(width - 1):]
+
+
 def coverage_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig, out_dir: Path) -> dict:
     """Per set: the mean coverage (its recall), how many real chips no draw covers, and the least
     covered chips with their nearest generated chip; one figure row per set."""
@@ -35,7 +41,7 @@ def coverage_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConf
                                      "nearest": s.name_of(g), "phi_distance": float(d)}
                                     for j, g, d in zip(least, idx[:, 0], dist[:, 0])]}
         rows.append([cell for j, g, d in zip(least, idx[:, 0], dist[:, 0])
-                     for cell in ((real.image(j), f"{real.name_of(j)[:18]}\ncovered {cover[j]:.2f}"),
+                     for cell in ((real.image(j), f"{_short(real.name_of(j))}\ncovered {cover[j]:.2f}"),
                                   (s.image(g), f"nearest of {s.name[:10]}\nφ {d:.1f}"))])
     if rows:
         mosaic_figure(rows, out_dir / FIGURE, gaps_before=range(2, len(rows[0]), 2))
