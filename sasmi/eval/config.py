@@ -17,9 +17,9 @@ class EvalConfig:
     pr_k: int = 3  # k of the k-NN balls that make the precision/recall manifolds (Kynkäänniemi et al. 2019)
     copy_percentile: float = 5.0  # "closer to a real image than this percentile of real→real nearest distances"
     neighbours_shown: int = 6  # generated images (rows) in each nearest-neighbour grid
+    neighbours_k: int = 4  # nearest real images shown per distance (pixel, φ)
     coverage_draws: int = 100  # draws of the generated set behind each real chip's coverage (recall chip by chip)
     least_covered_shown: int = 6  # real chips shown per set: those its generated chips cover least
-    neighbours_k: int = 4  # nearest real images shown per distance (pixel, φ)
     tsne_per_set: int = 400  # points per set in the t-SNE; caps its run time at a few seconds per set
     tsne_perplexity: float = 30.0  # lowered automatically for small sets (t-SNE needs perplexity < N / 3)
     thumbnails_per_set: int = 3  # images drawn on the t-SNE map per set

@@ -2,8 +2,8 @@
 
 Recall says how much of the real set the generated chips cover; this says which real chips they
 miss. Each of the least covered is drawn beside the generated chip nearest it in φ, so that one
-sees what the set offers in its place (on the second split, `docs/gan.md`: shadows half the chip
-long, where the renders cast none so long).
+sees what the set offers in its place (on the second split, docs/gan.md *Longer shadows*: shadows
+half the chip long and big, bright, irregular highlights, which the preset did not make).
 """
 from __future__ import annotations
 
@@ -30,9 +30,9 @@ def _short(name: str, width: int = 18) -> str:
 def coverage_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig, out_dir: Path) -> dict:
     """Per set: the mean coverage (its recall), how many real chips no draw covers, and the least
     covered chips with their nearest generated chip; one figure row per set."""
+    draws = min(cfg.coverage_draws, cfg.bootstrap)  # a quick evaluation (--bootstrap 10) stays quick
     result, rows = {}, []
     for i, s in enumerate(sets):
-        draws = min(cfg.coverage_draws, cfg.bootstrap)  # a quick evaluation (--bootstrap 10) stays quick
         cover = metrics.real_coverage(real.phi, s.phi, cfg.pr_k, draws, cfg.seed + 1 + i)  # (N_real,)
         least = np.argsort(cover, kind="stable")[:cfg.least_covered_shown]
         idx, dist = nearest(real.phi[least], s.phi, 1)  # (L, 1) each

@@ -20,8 +20,8 @@ from tqdm import tqdm
 from sasmi.errors import SasmiError
 from sasmi.eval import metrics
 from sasmi.eval.config import EvalConfig
-from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
 from sasmi.eval.coverage import FIGURE as COVERAGE_FIGURE, coverage_metrics
+from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
 from sasmi.eval.neighbours import copying_metrics
 from sasmi.eval.preservation import target_preservation
 from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, coverage_markdown, realism_markdown, \
