@@ -124,7 +124,7 @@ class ChipLabel:
                    extra={k: v for k, v in d.items() if k not in known})
 
 
-BUILTIN_CATEGORIES = ("cylinder", "sphere", "cone", "box", "torus")
+BUILTIN_CATEGORIES = ("cylinder", "sphere", "cone", "box", "torus", "boulder")
 
 
 def categories_of(labels: list[ChipLabel]) -> list[str]:

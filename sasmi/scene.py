@@ -29,7 +29,7 @@ from sasmi.errors import SasmiError
 from sasmi.scene_values import (check_mesh_file, check_table, check_value, draw, read_small_file, sample_table,
                                 target_kinds)
 
-SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "mesh")
+SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "boulder", "mesh")
 BACKSCATTER = ("lambert", "lambert2")
 
 
@@ -97,12 +97,14 @@ class Target:
     y: float = _spec(0.0, None, "", "m from the chip centre along track")
     yaw: float = _spec(0.0, None, "", "deg; axis angle from +x (range) towards +y (along-track)")
     burial: float = _spec(0.0, _nonneg, ">= 0", "m of the target's height below the local seafloor")
-    length: float = _spec(2.0, _positive, "> 0", "m; cylinder length, cone height, box length (along its axis)")
+    length: float = _spec(2.0, _positive, "> 0", "m; cylinder length, cone height, box or boulder length (along its axis)")
     radius: float = _spec(0.3, _positive, "> 0", "m; cylinder/sphere radius, cone base radius, torus major radius "
                           "(ring centre to tube centre)")
     radius_top: float = _spec(0.1, _nonneg, ">= 0", "m; top radius of the truncated cone")
-    width: float = _spec(1.0, _positive, "> 0", "m; box width (across its axis)")
-    height: float = _spec(0.5, _positive, "> 0", "m; box height")
+    width: float = _spec(1.0, _positive, "> 0", "m; box or boulder width (across its axis)")
+    height: float = _spec(0.5, _positive, "> 0", "m; box or boulder height")
+    lumpiness: float = _spec(0.3, lambda v: 0 <= v < 0.9, "in [0, 0.9)", "boulder: how far its surface strays from "
+                             "a smooth ellipsoid, as a share of its radius (0.3-0.6: a rock or a heap of debris)")
     tube_radius: float = _spec(0.15, _positive, "> 0", "m; torus tube radius (a tyre lying flat: its height is twice this)")
     mesh: str = _spec("", None, "", "OBJ/STL/PLY path (shape = 'mesh'), relative to the preset")
     scale: float = _spec(1.0, _positive, "> 0", "scale applied to a mesh file")
@@ -187,7 +189,7 @@ def target_height(t: Target) -> float | None:
         return 2 * t.radius
     if t.shape == "cone":
         return t.length
-    if t.shape == "box":
+    if t.shape in ("box", "boulder"):
         return t.height
     if t.shape == "torus":
         return 2 * t.tube_radius

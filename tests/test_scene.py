@@ -42,6 +42,8 @@ def write(tmp_path, text: str):
     ('[[targets]]\nshape = "donut"\n', "targets[0].shape: 'donut' is not allowed"),
     ('[[targets]]\nshape = "torus"\nradius = 0.2\ntube_radius = 0.2\n', "targets[0].tube_radius: 0.2 m closes the ring"),
     ('[[targets]]\nshape = "box"\nheight = 0.4\nburial = 0.4\n', "targets[0].burial: 0.4 m buries the whole target"),
+    ('[[targets]]\nshape = "boulder"\nheight = 0.4\nburial = 0.5\n', "targets[0].burial: 0.5 m buries the whole target"),
+    ('[[targets]]\nshape = "boulder"\nlumpiness = 1.0\n', "targets[0].lumpiness: 1.0 is not allowed (allowed: in [0, 0.9))"),
     # target kinds
     ('targets_per_chip = 1\n', "targets_per_chip: no [[targets]] tables to draw targets from"),
     ('targets_per_chip = -1\n[[targets]]\n', "targets_per_chip: -1 is not allowed (allowed: >= 0)"),
@@ -178,7 +180,7 @@ def test_a_kinds_bad_draw_names_its_table():
 def test_shipped_default_preset_draws_every_kind():
     preset = load_preset("cylinder_chip")
     shapes = {s.targets[0].shape for s in (preset.sample(0, i) for i in range(200))}
-    assert shapes == {"cylinder", "sphere", "box", "torus", "cone"}
+    assert shapes == {"cylinder", "sphere", "box", "torus", "cone", "boulder"}
 
 
 def test_cli_bad_target_kind_exit_2(tmp_path, capsys):

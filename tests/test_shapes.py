@@ -1,4 +1,4 @@
-"""The box and torus target shapes: closed meshes of the asked size, rendered with masks, labels and burial
+"""The box, torus and boulder target shapes: closed meshes of the asked size, rendered with masks, labels and burial
 that make sense, and the same image in Mitsuba and POV-Ray."""
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from sasmi.scene import Post, Scene, Seafloor, Sonar, Target
 
 BOX = Target(shape="box", yaw=30.0, length=1.6, width=0.8, height=0.6)
 TORUS = Target(shape="torus", radius=0.5, tube_radius=0.15)
+BOULDER = Target(shape="boulder", yaw=20.0, length=1.6, width=1.2, height=0.8, lumpiness=0.6)
 needs_povray = pytest.mark.skipif(shutil.which(povray.POVRAY) is None, reason="povray not installed (make setup)")
 
 
@@ -31,6 +32,7 @@ def scene_with(target: Target) -> Scene:
 @pytest.mark.parametrize("target, extent", [
     (BOX, (1.6, 0.8, 0.6)),
     (TORUS, (1.3, 1.3, 0.3)),  # 2 (R + r) across, 2 r high
+    (BOULDER, (1.6, 1.2, 0.8)),
 ])
 def test_new_shapes_are_closed_meshes_of_the_asked_size(target, extent):
     v, f = _unit_shape(dataclasses.replace(target, yaw=0.0), "targets[0]")
@@ -49,7 +51,28 @@ def test_torus_is_a_ring_lying_flat():
     assert np.hypot(v[:, 0], v[:, 1]).min() >= TORUS.radius - TORUS.tube_radius - 1e-9  # the hole
 
 
-@pytest.mark.parametrize("target", [BOX, TORUS], ids=["box", "torus"])
+def _radial_spread(target: Target) -> float:
+    """Spread of the distance from the centre, on the boulder squashed back to a unit sphere: 0 for an ellipsoid."""
+    v, _ = _unit_shape(target, "targets[0]")
+    unit = (v - (v.max(0) + v.min(0)) / 2) / [target.length, target.width, target.height] * 2
+    return float(np.linalg.norm(unit, axis=1).std())
+
+
+def test_boulder_is_lumpy_and_keeps_its_shape_when_moved():
+    """Lumpiness makes the surface stray from an ellipsoid; the lumps depend on the boulder's size and
+    lumpiness alone, so a pose sweep or a differentiable render that moves it does not reshape it."""
+    smooth = dataclasses.replace(BOULDER, lumpiness=0.0)
+    assert _radial_spread(smooth) < 1e-6 < 0.05 < _radial_spread(BOULDER)
+    assert _radial_spread(dataclasses.replace(BOULDER, lumpiness=0.3)) < _radial_spread(BOULDER)
+    v, _ = _unit_shape(BOULDER, "targets[0]")
+    moved, _ = _unit_shape(dataclasses.replace(BOULDER, x=-2.0, y=1.0, yaw=75.0, burial=0.2), "targets[0]")
+    np.testing.assert_array_equal(v, moved)
+    other, _ = _unit_shape(dataclasses.replace(BOULDER, length=1.7), "targets[0]")
+    other_unit = other / [1.7, 1.2, 0.8]
+    assert np.abs(other_unit - v / [1.6, 1.2, 0.8]).max() > 0.05  # another size, other lumps
+
+
+@pytest.mark.parametrize("target", [BOX, TORUS, BOULDER], ids=["box", "torus", "boulder"])
 def test_new_shapes_render_with_masks_labels_and_burial(target):
     size = 48
     out = render(scene_with(target), size=size, spp=4)
@@ -67,15 +90,15 @@ def test_new_shapes_render_with_masks_labels_and_burial(target):
     floor = np.median(out.image[out.mask == 0])
     assert out.image[out.mask == 1].max() > 1.5 * floor and out.image[out.mask == 2].mean() < 0.5 * floor
     # burying it deeper hides part of it and shortens its shadow
-    deeper = render(scene_with(dataclasses.replace(target, burial=0.6 * (target.height if target.shape == "box"
-                                                                               else 2 * target.tube_radius))),
+    deeper = render(scene_with(dataclasses.replace(target, burial=0.6 * (2 * target.tube_radius if target.shape == "torus"
+                                                                               else target.height))),
                     size=size, spp=4).label.targets[0]
     assert deeper.shadow_pixels < 0.8 * label.shadow_pixels
     assert deeper.visible_pixels <= label.visible_pixels
 
 
 @needs_povray
-@pytest.mark.parametrize("target", [BOX, TORUS], ids=["box", "torus"])
+@pytest.mark.parametrize("target", [BOX, TORUS, BOULDER], ids=["box", "torus", "boulder"])
 def test_new_shapes_agree_with_povray(target):
     scene = scene_with(target)
     size = 32

@@ -20,6 +20,7 @@ from sasmi.scene import Scene, Target
 
 CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (kernel reuse)
 SPHERE_SUBDIVISIONS = 3
+BOULDER_LUMPS = ((6, 0.6), (24, 0.3))  # (bumps, angular width in rad) per scale: a few big lobes, many small knobs
 TORUS_SECTIONS = (32, 12)  # around the ring, around the tube: 384 vertices, fixed as for cylinders
 
 
@@ -119,6 +120,8 @@ def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     elif t.shape == "box":
         m = trimesh.creation.box(extents=[t.length, t.width, t.height])
         v, f = m.vertices, m.faces
+    elif t.shape == "boulder":
+        v, f = _boulder(t)
     elif t.shape == "torus":  # a tyre lying flat: the ring in the seabed's plane
         m = trimesh.creation.torus(major_radius=t.radius, minor_radius=t.tube_radius,
                                    major_sections=TORUS_SECTIONS[0], minor_sections=TORUS_SECTIONS[1])
@@ -132,6 +135,28 @@ def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(v, dtype=np.float64)
     v = v - [0.0, 0.0, v[:, 2].min()]
     return v, np.asarray(f, dtype=np.uint32)
+
+
+def _boulder(t: Target) -> tuple[np.ndarray, np.ndarray]:
+    """A rock or a heap of debris: a sphere whose radius varies by smooth random bumps at two scales, then
+    stretched to length x width x height. Its bumps are seeded by its size alone, so moving, turning or
+    burying a boulder (as a differentiable render or a pose sweep does) keeps its shape."""
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)  # as many vertices as a sphere
+    directions = np.asarray(m.vertices, dtype=np.float64)
+    seed = np.frombuffer(np.array([t.length, t.width, t.height, t.lumpiness]).tobytes(), dtype=np.uint32)
+    rng = np.random.default_rng(seed)
+    bumps = np.zeros(len(directions))
+    for count, width in BOULDER_LUMPS:
+        centres = rng.normal(size=(count, 3))
+        centres /= np.linalg.norm(centres, axis=1, keepdims=True)
+        weights = rng.normal(size=count) * width  # smaller knobs rise less
+        bumps += np.exp((directions @ centres.T - 1.0) / width**2) @ weights
+    bumps /= max(np.abs(bumps).max(), 1e-12)  # in [-1, 1]: the radius stays in 1 +- lumpiness, above 0
+    v = directions * (1.0 + t.lumpiness * bumps)[:, None]
+    v = (v - (v.max(0) + v.min(0)) / 2) / (v.max(0) - v.min(0)) * [t.length, t.width, t.height]
+    return v, np.asarray(m.faces)
 
 
 def check_scene(scene: Scene) -> None:
