@@ -284,8 +284,18 @@ def recipes_folder() -> Path:
 
 def with_defaults(plan: FitPlan) -> FitPlan:
     phi_real = plan.phi_real or plan.real
-    return replace(plan, phi_real=phi_real, validation=plan.validation or plan.real,
+    return replace(plan, phi_real=phi_real, validation=plan.validation or default_validation(plan.real),
                    floors=default_floors(phi_real) if plan.floors is None else plan.floors)
+
+
+def default_validation(real: str) -> str:
+    """`sasmi split`'s validation/CATEGORY beside a --real of train/CATEGORY, else --real itself: a report
+    on the chips the GAN learned from flatters it, and the issue's command names only train folders."""
+    real_path = Path(real)
+    beside = real_path.parent.parent / "validation" / real_path.name
+    if real_path.parent.name == "train" and beside.is_dir() and list_images(beside):
+        return str(beside)
+    return real
 
 
 def default_floors(phi_real: str) -> str:

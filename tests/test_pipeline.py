@@ -129,3 +129,25 @@ def test_fit_takes_the_phi_chips_seafloor_as_floors_unless_told_not_to(tmp_path)
     assert plan("--phi-real", str(train), "--floors", str(tmp_path / "mine")).floors == str(tmp_path / "mine")
     assert plan().floors == ""  # --real alone: a targets folder has no seafloor/
     assert "floors" not in plan("--no-floors").identity()  # runs from before --floors still resume
+
+
+def test_fit_reports_on_the_splits_validation_chips_unless_told_otherwise(tmp_path):
+    """The issue's command names only train folders: its report must still be on validation chips."""
+    from sasmi.cli import build_parser
+    from sasmi.pipeline import FitPlan, with_defaults
+
+    split = tmp_path / "split"
+    _chips(split / "train" / "targets", 2, 0), _chips(split / "validation" / "targets", 2, 1)
+    _chips(tmp_path / "mine", 2, 2)
+
+    def validation(real, *argv):
+        args = build_parser().parse_args(["fit", "--real", str(real), "--out", "run", *argv])
+        return with_defaults(FitPlan(real=args.real, out=args.out, phi_real=args.phi_real,
+                                     validation=args.validation, floors=args.floors)).validation
+
+    assert validation(split / "train" / "targets") == str(split / "validation" / "targets")
+    assert validation(split / "train" / "targets", "--validation", str(tmp_path / "mine")) == str(tmp_path / "mine")
+    assert validation(tmp_path / "mine") == str(tmp_path / "mine")  # no split beside it: the warning says so
+    for chip in (split / "validation" / "targets").iterdir():
+        chip.unlink()
+    assert validation(split / "train" / "targets") == str(split / "train" / "targets")  # an empty side is no set

@@ -17,7 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="RUN", help="run folder")
     p.add_argument("--phi-real", metavar="DIR", help="chips φ learns from (default: --real); targets and seafloor")
     p.add_argument("--validation", metavar="DIR",
-                   help="real chips the report compares with (default: --real, which flatters); see `sasmi split`")
+                   help="real chips the report compares with (default: validation/CATEGORY beside a --real of "
+                        "`sasmi split`'s train/CATEGORY, else --real itself, which flatters)")
     p.add_argument("--minutes", type=float, default=60.0, help="time budget of the whole run")
     p.add_argument("--size", type=int, default=128, help="image size, a multiple of 16")
     p.add_argument("--preset", default="cylinder_chip", help="scene preset: a TOML file or a shipped preset's name")
