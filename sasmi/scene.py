@@ -104,7 +104,7 @@ class Target:
     width: float = _spec(1.0, _positive, "> 0", "m; box or boulder width (across its axis)")
     height: float = _spec(0.5, _positive, "> 0", "m; box or boulder height")
     lumpiness: float = _spec(0.3, lambda v: 0 <= v < 0.9, "in [0, 0.9)", "boulder: how far its surface strays from "
-                             "a smooth ellipsoid, as a share of its radius (0.3-0.6: a rock or a heap of debris)")
+                             "a smooth ellipsoid: its largest lump as a share of its radius (the default preset: 0.4-0.85)")
     tube_radius: float = _spec(0.15, _positive, "> 0", "m; torus tube radius (a tyre lying flat: its height is twice this)")
     mesh: str = _spec("", None, "", "OBJ/STL/PLY path (shape = 'mesh'), relative to the preset")
     scale: float = _spec(1.0, _positive, "> 0", "scale applied to a mesh file")

@@ -101,7 +101,7 @@ def _load_mesh_file(path: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """Target mesh in metres, axis along +x for lying shapes (cylinder, box length), lowest point at z = 0."""
+    """Target mesh in metres, axis along +x for lying shapes (cylinder, box and boulder length), lowest point at z = 0."""
     import trimesh
 
     if t.shape == "cylinder":
