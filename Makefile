@@ -25,6 +25,7 @@ $(STAMP): pyproject.toml
 	touch $@
 
 demo: setup
+	rm -rf demo  # 16 chips: redrawn whole, so a changed preset never meets an old demo's settings
 	$(BIN)/sasmi render scenes/cylinder_chip.toml --count 16 --out demo/renders
 	$(BIN)/sasmi sheet demo/renders --out demo/contact_sheet.png
 
