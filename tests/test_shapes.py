@@ -14,7 +14,7 @@ from sasmi.render import crosscheck as xc
 from sasmi.render import povray
 from sasmi.render.geometry import _unit_shape, build_geometry
 from sasmi.render.mitsuba import Renderer, render
-from sasmi.scene import Post, Scene, Seafloor, Sonar, Target
+from sasmi.scene import Post, Scene, Seafloor, Sonar, Target, target_height
 
 BOX = Target(shape="box", yaw=30.0, length=1.6, width=0.8, height=0.6)
 TORUS = Target(shape="torus", radius=0.5, tube_radius=0.15)
@@ -90,8 +90,7 @@ def test_new_shapes_render_with_masks_labels_and_burial(target):
     floor = np.median(out.image[out.mask == 0])
     assert out.image[out.mask == 1].max() > 1.5 * floor and out.image[out.mask == 2].mean() < 0.5 * floor
     # burying it deeper hides part of it and shortens its shadow
-    deeper = render(scene_with(dataclasses.replace(target, burial=0.6 * (2 * target.tube_radius if target.shape == "torus"
-                                                                               else target.height))),
+    deeper = render(scene_with(dataclasses.replace(target, burial=0.6 * target_height(target))),
                     size=size, spp=4).label.targets[0]
     assert deeper.shadow_pixels < 0.8 * label.shadow_pixels
     assert deeper.visible_pixels <= label.visible_pixels
