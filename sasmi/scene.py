@@ -30,7 +30,7 @@ from sasmi.scene_values import (check_mesh_file, check_table, check_value, draw,
                                 target_kinds)
 
 SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "boulder", "mesh")
-BACKSCATTER = ("lambert", "lambert2")
+BACKSCATTER = ("lambert", "lambert2", "rough")
 
 
 def _positive(v: float) -> bool:
@@ -83,7 +83,8 @@ class Seafloor:
     rocks: int = _spec(0, _nonneg, ">= 0", "number of rock/clutter bumps")
     rock_radius: float = _spec(0.15, _positive, "> 0", "m; size of each bump")
     backscatter: str = _spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
-                             "scattering law: lambert (cos of incidence, as today), lambert2 (cos^2, Lambert's law)")
+                             "scattering law: lambert (cos of incidence, as today), lambert2 (cos^2, Lambert's law), "
+                             "rough (cos^0.5, nearly even: rock and rubble)")
     patchiness: float = _spec(0.0, lambda v: 0 <= v <= 2, "in [0, 2]", "std / mean of the sediment's backscatter "
                               "strength over the floor (a gamma texture under the speckle: K-distributed clutter); "
                               "0 = uniform; above 2 most of the floor renders black")
@@ -109,6 +110,8 @@ class Target:
     mesh: str = _spec("", None, "", "OBJ/STL/PLY path (shape = 'mesh'), relative to the preset")
     scale: float = _spec(1.0, _positive, "> 0", "scale applied to a mesh file")
     albedo: float = _spec(0.9, _unit, "in [0, 1]")
+    backscatter: str = _spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
+                             "scattering law, as seafloor.backscatter: rough keeps a boulder's top bright at low grazing")
 
 
 @dataclass(frozen=True)

@@ -77,6 +77,20 @@ def test_matching_floors_picks_the_targets_sonar(tmp_path):
     assert len(picks) == 6 and all(p.name.startswith("same_") for p in picks), [p.name for p in picks]
 
 
+def test_matching_floors_picks_the_targets_range_fall_off(tmp_path):
+    """Target chips darken along range (far / near about 0.7, as a partial TVG leaves them); of two floors alike
+    in everything else, the one that darkens the same way is picked, not the flat one."""
+    targets, floors = tmp_path / "targets", tmp_path / "floors"
+    fall_off = np.linspace(1.2, 0.8, SIZE)[None, :]  # columns are ground range
+    for i in range(6):
+        render, _ = _scene()
+        write_gray(targets / f"t{i}.png", _speckle(0.15, 10 + i) * (render / 0.3) * fall_off)
+        write_gray(floors / f"falling_{i}.png", _speckle(0.15, 20 + i) * fall_off)
+        write_gray(floors / f"flat_{i}.png", _speckle(0.15, 30 + i))
+    picks = matching_floors(floors, targets, SIZE)
+    assert all(p.name.startswith("falling_") for p in picks), [p.name for p in picks]
+
+
 def test_fresh_speckle_keeps_the_seabed_and_not_the_pixels():
     """A floor with bands along range and a bright patch: the same seabed, other speckle (the copying detector's pixels)."""
     from scipy.ndimage import gaussian_filter

@@ -1,4 +1,4 @@
-"""Lambert's cos^2 backscatter law as a Mitsuba BSDF (`seafloor.backscatter = "lambert2"`).
+"""Backscatter laws other than Mitsuba's `diffuse` as one Mitsuba BSDF: radiance ~ cos^power(incidence).
 
 Mitsuba's `diffuse` BSDF gives radiance albedo / pi * I cos(theta) / d^2 per spot: the
 cosine of incidence once. Lambert's law for acoustic backscatter, sigma = mu sin^2(grazing)
@@ -8,10 +8,15 @@ albedo / pi * cos^2(theta_light), so a tilted facet facing the array brightens m
 facet turned away darkens more than with `diffuse`. The camera direction does not enter:
 the camera only looks at the floor, it is not the receiver. Its `reflectance` texture
 traverses like diffuse's (`reflectance.value`), so scene updates and AD see the same key.
+
+`backscatter = "rough"` (power 0.5, geometry.COS_POWER) is the other way round: a surface rough at
+scales far below a pixel (rock, rubble) turns facets towards the array whatever the mean
+slope, so its echo depends little on incidence and a boulder's top, lit at a few degrees'
+grazing, stays bright instead of fading as cos(incidence).
 """
 from __future__ import annotations
 
-PLUGIN = "lambert2"
+PLUGIN = "cos_power"
 _registered: set[int] = set()
 
 
@@ -20,10 +25,11 @@ def register(mi, dr) -> None:
     if id(mi.BSDF) in _registered:
         return
 
-    class LambertSquared(mi.BSDF):
+    class CosPower(mi.BSDF):
         def __init__(self, props):
             mi.BSDF.__init__(self, props)
             self.reflectance = props["reflectance"]
+            self.power = props["power"]
             flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
             self.m_components = [flags]
             self.m_flags = flags
@@ -31,7 +37,7 @@ def register(mi, dr) -> None:
         def _value(self, si, wo, active):
             cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
             ok = active & (cos_i > 0) & (cos_o > 0)
-            return ok, self.reflectance.eval_1(si, ok) * dr.inv_pi * cos_o * cos_o
+            return ok, self.reflectance.eval_1(si, ok) * dr.inv_pi * dr.power(cos_o, self.power)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             bs = mi.BSDFSample3f()
@@ -61,12 +67,15 @@ def register(mi, dr) -> None:
             pass
 
         def to_string(self):
-            return f"LambertSquared[reflectance={self.reflectance}]"
+            return f"CosPower[power={self.power}, reflectance={self.reflectance}]"
 
-    mi.register_bsdf(PLUGIN, lambda props: LambertSquared(props))
+    mi.register_bsdf(PLUGIN, lambda props: CosPower(props))
     _registered.add(id(mi.BSDF))
 
 
-def bsdf_dict(albedo: float, cos_power: int) -> dict:
+def bsdf_dict(albedo: float, cos_power: float) -> dict:
     """load_dict entry of a surface with `albedo` and cos(incidence)^cos_power radiance."""
-    return {"type": "diffuse" if cos_power == 1 else PLUGIN, "reflectance": {"type": "uniform", "value": albedo}}
+    reflectance = {"type": "uniform", "value": albedo}
+    if cos_power == 1:
+        return {"type": "diffuse", "reflectance": reflectance}
+    return {"type": PLUGIN, "power": float(cos_power), "reflectance": reflectance}

@@ -24,7 +24,8 @@ BOULDER_LUMPS = ((6, 0.6), (24, 0.3))  # (bumps, angular width in rad) per scale
 TORUS_SECTIONS = (32, 12)  # around the ring, around the tube: 384 vertices, fixed as for cylinders
 
 
-COS_POWER = {"lambert": 1, "lambert2": 2}  # seafloor.backscatter -> power of cos(incidence) in the radiance
+# backscatter -> power of cos(incidence) in the radiance; rough: 0 measured no closer to rock than 0.5
+COS_POWER = {"lambert": 1, "lambert2": 2, "rough": 0.5}
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,7 @@ class TriangleMesh:
     vertices: np.ndarray  # (V, 3) float32, chip units
     faces: np.ndarray  # (F, 3) uint32, counter-clockwise seen from outside
     albedo: float
-    cos_power: int = 1  # radiance = albedo / pi * irradiance * cos(incidence)^(cos_power - 1)
+    cos_power: float = 1  # radiance = albedo / pi * irradiance * cos(incidence)^(cos_power - 1)
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,7 @@ class Geometry:
     def structure(self) -> tuple:
         """What must stay equal for a compiled renderer to be updated in place."""
         return (self.size, len(self.floor.vertices), self.floor.cos_power, len(self.emitter_positions),
-                tuple((len(t.vertices), len(t.faces)) for t in self.targets))
+                tuple((len(t.vertices), len(t.faces), t.cos_power) for t in self.targets))
 
 
 def grid_faces(n: int) -> np.ndarray:
@@ -185,7 +186,7 @@ def target_mesh(t: Target, floor: Surface, chip_size: float, where: str) -> Tria
     rot = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
     ground = float(floor.at(t.x, t.y))
     v = v @ rot.T + [t.x, t.y, ground - t.burial]
-    return TriangleMesh((v * (2.0 / chip_size)).astype(np.float32), f, t.albedo)
+    return TriangleMesh((v * (2.0 / chip_size)).astype(np.float32), f, t.albedo, COS_POWER[t.backscatter])
 
 
 def track_length(sonar) -> float:
