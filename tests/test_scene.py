@@ -44,6 +44,7 @@ def write(tmp_path, text: str):
     ('[[targets]]\nshape = "box"\nheight = 0.4\nburial = 0.4\n', "targets[0].burial: 0.4 m buries the whole target"),
     ('[[targets]]\nshape = "boulder"\nheight = 0.4\nburial = 0.5\n', "targets[0].burial: 0.5 m buries the whole target"),
     ('[[targets]]\nshape = "boulder"\nlumpiness = 1.0\n', "targets[0].lumpiness: 1.0 is not allowed (allowed: in [0, 0.9))"),
+    ('[[targets]]\nbackscatter = "shiny"\n', "targets[0].backscatter: 'shiny' is not allowed (allowed: one of lambert, lambert2, rough)"),
     # target kinds
     ('targets_per_chip = 1\n', "targets_per_chip: no [[targets]] tables to draw targets from"),
     ('targets_per_chip = -1\n[[targets]]\n', "targets_per_chip: -1 is not allowed (allowed: >= 0)"),

@@ -108,3 +108,24 @@ def test_new_shapes_agree_with_povray(target):
     # and the comparison sees the target: POV-Ray's mask pass puts it where Mitsuba does
     sdl = povray.geometry_sdl(build_geometry(scene, size))
     assert povray.target_mask(sdl, size).sum() > 5
+
+
+@needs_povray
+def test_rough_backscatter_agrees_with_povray():
+    """A rough boulder (cos^0.5; POV-Ray: brilliance 0.5) renders alike in both, and the law is seen: its
+    pixels shine 1.5x as bright as a lambert boulder's (measured 1.52 in both renderers; whole-image
+    Pearson r against POV-Ray 0.997, and 0.950 for Mitsuba's lambert boulder against POV-Ray's rough one)."""
+    size = 32
+    renderer = Renderer(size=size, spp=64)
+    rough = scene_with(dataclasses.replace(BOULDER, backscatter="rough"))
+    mitsuba, (pov, _) = xc.mitsuba_side(rough, renderer), xc.povray_side(rough, size)
+    m = xc.compare(mitsuba, pov)
+    assert m.passed, xc.table(m)
+    lambert = xc.mitsuba_side(scene_with(BOULDER), renderer)
+    both = mitsuba.target & pov.target & lambert.target
+
+    def target_level(side: xc.Side) -> float:
+        return float(side.radiance[both].mean())
+
+    assert target_level(mitsuba) == pytest.approx(target_level(pov), rel=0.05)
+    assert target_level(mitsuba) > 1.3 * target_level(lambert)
