@@ -24,7 +24,7 @@ BOULDER_LUMPS = ((6, 0.6), (24, 0.3))  # (bumps, angular width in rad) per scale
 TORUS_SECTIONS = (32, 12)  # around the ring, around the tube: 384 vertices, fixed as for cylinders
 
 
-# backscatter -> power of cos(incidence) in the radiance; rough: 0 measured no closer to rock than 0.5
+# backscatter -> power of cos(incidence) in the radiance; rough: 0 (even) measured further from real rock than 0.5
 COS_POWER = {"lambert": 1, "lambert2": 2, "rough": 0.5}
 
 
