@@ -11,7 +11,8 @@ A preset value may be a plain value or a distribution, `{uniform = [lo, hi]}`,
 of scenes; `Preset.sample(seed, index)` draws scene `index` from a generator seeded by
 (seed, index) alone, so any scene can be re-made without the ones before it. With a
 top-level `targets_per_chip`, the [[targets]] tables are kinds of target drawn by `weight`
-(see `TargetKinds`). Value checks and draws live in sasmi/scene_values.py.
+(see `TargetKinds`); a [companions] table adds other objects off the chip's centre (see
+`Companions`). Value checks and draws live in sasmi/scene_values.py.
 """
 from __future__ import annotations
 
@@ -26,8 +27,8 @@ import numpy as np
 
 from sasmi import limits
 from sasmi.errors import SasmiError
-from sasmi.scene_values import (check_mesh_file, check_table, check_value, draw, read_small_file, sample_table,
-                                target_kinds)
+from sasmi.scene_values import (check_mesh_file, check_table, check_value, companion_kinds, draw, read_small_file,
+                                sample_table, target_kinds)
 
 SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "boulder", "mesh")
 BACKSCATTER = ("lambert", "lambert2", "rough")
@@ -213,8 +214,20 @@ class TargetKinds:
     weight: float = _spec(1.0, _nonneg, ">= 0", "a [[targets]] table's share of the draws (with targets_per_chip)")
 
 
+@dataclass(frozen=True)
+class Companions:
+    """Other objects in view beside a chip's target(s), as real chips show them (rocks, debris, another
+    mine): the [[companions.kinds]] tables are kinds like [[targets]] ones (weight, shape, sizes), and each
+    companion lies at random over the chip, `clearance` from every other object and half of it from the
+    edges. They are drawn from their own random stream, so adding them changes no other draw of a scene."""
+    share: float = _spec(0.0, _unit, "in [0, 1]", "share of chips that have companions")
+    most: int = _spec(1, lambda v: 1 <= v <= 16, "in [1, 16]", "companions in such a chip: 1 to `most`, evenly")
+    clearance: float = _spec(4.0, _positive, "> 0", "m from a companion's centre to every other object's")
+
+
+PLACEMENT_TRIES = 20  # random places tried for a companion before the chip goes without it
 SECTIONS = {"sonar": Sonar, "seafloor": Seafloor, "post": Post}
-TOP_KEYS = set(SECTIONS) | {"targets", "target_grid", "targets_per_chip", "description"}
+TOP_KEYS = set(SECTIONS) | {"targets", "target_grid", "targets_per_chip", "companions", "description"}
 
 
 @dataclass(frozen=True)
@@ -247,13 +260,16 @@ class Preset:
             target = grid.pop("target", {})
             check_table(TargetGrid, grid, "target_grid")
             check_table(Target, target, "target_grid.target", skip=("x", "y"))
+        kinds = {f"targets[{i}]": t for i, t in enumerate(targets)} if weights is not None else {}
+        if "companions" in raw:
+            _, companions, _ = companion_kinds(raw["companions"], Companions, TargetKinds, Target)
+            kinds |= {f"companions.kinds[{i}]": t for i, t in enumerate(companions)}
         preset = cls(raw=raw, path=path)
         scene = preset.sample(0, 0)  # cross-field checks on one draw, so a broken preset fails at load
-        if weights is not None:  # and on one draw of every kind, which one chip may not pick
-            rng = np.random.default_rng(0)
-            for i, t in enumerate(targets):
-                kind = sample_table(Target, t, rng, f"targets[{i}]")
-                dataclasses.replace(scene, targets=(kind,)).validate(names=(f"targets[{i}]",))
+        rng = np.random.default_rng(0)  # and on one draw of every kind, which one chip may not pick
+        for where, t in kinds.items():
+            kind = sample_table(Target, t, rng, where)
+            dataclasses.replace(scene, targets=(kind,)).validate(names=(where,))
         return preset
 
     def resolve_mesh(self, mesh: str) -> Path:
@@ -280,12 +296,39 @@ class Preset:
         names = tuple(f"targets[{k}]" for k in picks)
         if "target_grid" in self.raw:
             targets += self._grid_targets(sonar, rng, len(targets))
+            names += tuple(f"targets[{k}]" for k in range(len(names), len(targets)))
+        if "companions" in self.raw:
+            companions, kinds = self._companions(sonar, targets, np.random.default_rng([seed, index, 1]))
+            targets, names = targets + companions, names + kinds
         targets = [dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" and t.mesh else t
                    for t in targets]
         scene_seed = int(rng.integers(2**31 - 1))
-        names += tuple(f"targets[{k}]" for k in range(len(names), len(targets)))  # grid targets
         return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed
                      ).validate(names)
+
+    def _companions(self, sonar: Sonar, targets: list[Target], rng: np.random.Generator
+                    ) -> tuple[list[Target], tuple[str, ...]]:
+        """This chip's companions and the names of their kinds, placed clear of `targets` and of each other."""
+        settings, tables, weights = companion_kinds(self.raw["companions"], Companions, TargetKinds, Target)
+        c = sample_table(Companions, settings, rng, "companions")
+        half = (sonar.chip_size - c.clearance) / 2
+        if half <= 0:
+            raise SasmiError(f"companions.clearance: {c.clearance:g} m leaves no room on a {sonar.chip_size:g} m chip "
+                             f"(allowed: < sonar.chip_size)")
+        if rng.random() >= c.share:
+            return [], ()
+        taken = [(t.x, t.y) for t in targets]
+        companions, names = [], ()
+        for _ in range(int(rng.integers(1, c.most + 1))):
+            k = int(rng.choice(len(tables), p=weights))
+            for _try in range(PLACEMENT_TRIES):
+                x, y = (float(v) for v in rng.uniform(-half, half, size=2))
+                if all(math.hypot(x - tx, y - ty) >= c.clearance for tx, ty in taken):
+                    taken.append((x, y))
+                    companions.append(sample_table(Target, tables[k], rng, f"companions.kinds[{k}]", x=x, y=y))
+                    names += (f"companions.kinds[{k}]",)
+                    break
+        return companions, names
 
     def _grid_targets(self, sonar: Sonar, rng: np.random.Generator, first: int) -> list[Target]:
         grid_raw = dict(self.raw["target_grid"])

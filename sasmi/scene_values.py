@@ -197,3 +197,34 @@ def target_kinds(raw: dict, kinds: type) -> tuple[list[dict], np.ndarray | None]
         raise SasmiError("targets: every weight is 0 (allowed: at least one [[targets]] table with weight > 0)")
     plain = [{k: v for k, v in t.items() if k != "weight"} if isinstance(t, dict) else t for t in tables]
     return plain, np.asarray(weights) / sum(weights)
+
+
+def companion_kinds(raw: Any, settings: type, kinds: type, target: type) -> tuple[dict, list[dict], np.ndarray]:
+    """A preset's [companions] table: its settings without `kinds`, its [[companions.kinds]] tables without
+    their `weight`, and the probability of drawing each. `settings`, `kinds`, `target`: the dataclasses of
+    the settings, of `weight` and of a target; the tables may not set x or y (companions are placed)."""
+    if not isinstance(raw, dict):
+        raise SasmiError(f"companions: expected a table ([companions]), got {type(raw).__name__}")
+    settings_raw = {k: v for k, v in raw.items() if k != "kinds"}
+    check_table(settings, settings_raw, "companions")
+    tables = raw.get("kinds")
+    if not isinstance(tables, list) or not tables:
+        raise SasmiError("companions.kinds: expected at least one [[companions.kinds]] table")
+    weights, plain = [], []
+    for i, t in enumerate(tables):
+        where = f"companions.kinds[{i}]"
+        if not isinstance(t, dict):
+            raise SasmiError(f"{where}: expected a table, got {type(t).__name__}")
+        for key in ("x", "y"):
+            if key in t:
+                raise SasmiError(f"{where}.{key}: companions are placed at random over the chip "
+                                 "(allowed: leave x and y out; companions.clearance keeps them apart)")
+        w = t.get("weight", 1.0)
+        if isinstance(w, dict):
+            raise SasmiError(f"{where}.weight: a number, not a distribution (got {w!r})"[:300])
+        weights.append(check_value(kinds, "weight", w, f"{where}.weight"))
+        plain.append({k: v for k, v in t.items() if k != "weight"})
+        check_table(target, plain[-1], where)
+    if sum(weights) <= 0:
+        raise SasmiError("companions.kinds: every weight is 0 (allowed: at least one with weight > 0)")
+    return settings_raw, plain, np.asarray(weights) / sum(weights)
