@@ -132,8 +132,9 @@ def test_next_scene_reuses_the_compiled_kernels():
     import drjit as dr
 
     preset = load_preset(REPO / "scenes" / "cylinder_chip.toml")
-    first, second = preset.sample(1, 2), preset.sample(1, 3)  # a cylinder, then a block
+    first, second = preset.sample(1, 2), preset.sample(1, 5)  # a cylinder, then a block, neither with companions
     assert first.targets[0].shape != second.targets[0].shape and first.sonar.cone_angle != second.sonar.cone_angle
+    assert len(first.targets) == len(second.targets) == 1  # another count of targets is another scene
     renderer = Renderer(size=32, spp=4)
     renderer.render(first)
     loaded = renderer.mitsuba_scene
