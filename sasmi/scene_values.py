@@ -187,16 +187,21 @@ def target_kinds(raw: dict, kinds: type) -> tuple[list[dict], np.ndarray | None]
     check_field(kinds, "targets_per_chip", raw["targets_per_chip"], "targets_per_chip")
     if not tables:
         raise SasmiError("targets_per_chip: no [[targets]] tables to draw targets from (allowed: at least one)")
+    plain = [{k: v for k, v in t.items() if k != "weight"} if isinstance(t, dict) else t for t in tables]
+    return plain, _draw_probabilities(tables, kinds, "targets")
+
+
+def _draw_probabilities(tables: list, kinds: type, section: str) -> np.ndarray:
+    """Each kind table's `weight` (default 1) over the sum of them; errors name `section[i].weight`."""
     weights = []
     for i, t in enumerate(tables):
         w = t.get("weight", 1.0) if isinstance(t, dict) else 1.0
         if isinstance(w, dict):
-            raise SasmiError(f"targets[{i}].weight: a number, not a distribution (got {w!r})"[:300])
-        weights.append(check_value(kinds, "weight", w, f"targets[{i}].weight"))
+            raise SasmiError(f"{section}[{i}].weight: a number, not a distribution (got {w!r})"[:300])
+        weights.append(check_value(kinds, "weight", w, f"{section}[{i}].weight"))
     if sum(weights) <= 0:
-        raise SasmiError("targets: every weight is 0 (allowed: at least one [[targets]] table with weight > 0)")
-    plain = [{k: v for k, v in t.items() if k != "weight"} if isinstance(t, dict) else t for t in tables]
-    return plain, np.asarray(weights) / sum(weights)
+        raise SasmiError(f"{section}: every weight is 0 (allowed: at least one [[{section}]] table with weight > 0)")
+    return np.asarray(weights) / sum(weights)
 
 
 def companion_kinds(raw: Any, settings: type, kinds: type, target: type) -> tuple[dict, list[dict], np.ndarray]:
@@ -210,7 +215,8 @@ def companion_kinds(raw: Any, settings: type, kinds: type, target: type) -> tupl
     tables = raw.get("kinds")
     if not isinstance(tables, list) or not tables:
         raise SasmiError("companions.kinds: expected at least one [[companions.kinds]] table")
-    weights, plain = [], []
+    probabilities = _draw_probabilities(tables, kinds, "companions.kinds")
+    plain = []
     for i, t in enumerate(tables):
         where = f"companions.kinds[{i}]"
         if not isinstance(t, dict):
@@ -219,12 +225,6 @@ def companion_kinds(raw: Any, settings: type, kinds: type, target: type) -> tupl
             if key in t:
                 raise SasmiError(f"{where}.{key}: companions are placed at random over the chip "
                                  "(allowed: leave x and y out; companions.clearance keeps them apart)")
-        w = t.get("weight", 1.0)
-        if isinstance(w, dict):
-            raise SasmiError(f"{where}.weight: a number, not a distribution (got {w!r})"[:300])
-        weights.append(check_value(kinds, "weight", w, f"{where}.weight"))
         plain.append({k: v for k, v in t.items() if k != "weight"})
         check_table(target, plain[-1], where)
-    if sum(weights) <= 0:
-        raise SasmiError("companions.kinds: every weight is 0 (allowed: at least one with weight > 0)")
-    return settings_raw, plain, np.asarray(weights) / sum(weights)
+    return settings_raw, plain, probabilities
