@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sasmi.floors import fresh_speckle, matching_floors, on_floor
+from sasmi.floors import FLOOR_CHOICES, fresh_speckle, matching_floors, on_floor
 from sasmi.images import write_gray
 
 SIZE = 64
@@ -91,7 +91,21 @@ def test_matching_floors_picks_the_targets_sonar(tmp_path):
         ripples = 0.55 + 0.3 * np.sin(2 * np.pi * cols / 8.0 + i)
         write_gray(floors / f"other_{i}.png", _speckle(1.0, 30 + i, looks=20.0) * ripples)
     picks = matching_floors(floors, targets, SIZE)
-    assert len(picks) == 6 and all(p.name.startswith("same_") for p in picks), [p.name for p in picks]
+    assert len(picks) == 6 * FLOOR_CHOICES and all(p.name.startswith("same_") for p in picks), [p.name for p in picks]
+
+
+def test_matching_floors_keeps_the_next_nearest_floor_too(tmp_path):
+    """One target chip: both floors of its sonar are kept, not only the nearest (the nearest alone left about
+    35 distinct floors for 400 composites), and no floor of the other sonar."""
+    targets, floors = tmp_path / "targets", tmp_path / "floors"
+    cols = np.arange(SIZE)[None, :]
+    render, _ = _scene()
+    write_gray(targets / "t.png", _speckle(0.15, 10) * (render / 0.3))
+    for i in range(2):
+        write_gray(floors / f"same_{i}.png", _speckle(0.15, 20 + i))
+    for i in range(4):
+        write_gray(floors / f"other_{i}.png", _speckle(1.0, 30 + i, looks=20.0) * (0.55 + 0.3 * np.sin(2 * np.pi * cols / 8.0 + i)))
+    assert sorted(p.name for p in matching_floors(floors, targets, SIZE)) == ["same_0.png", "same_1.png"]
 
 
 def test_matching_floors_picks_the_targets_range_fall_off(tmp_path):
