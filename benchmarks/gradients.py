@@ -38,7 +38,7 @@ def main() -> None:
 
     from sasmi.fit import central_difference
     from sasmi.render.differentiable import PARAMETERS, DifferentiableRenderer, scene_parameters
-    from sasmi.scene import Preset
+    from sasmi.preset import Preset
 
     renderer = DifferentiableRenderer(args.size, args.spp)
     for scene_name, raw in SCENES.items():

@@ -27,7 +27,7 @@ def render(preset: Path, out: Path, count: int, size: int, spp: int, seed: int) 
 
     from sasmi.dataset import RenderJob, render_set
     from sasmi.images import list_images
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     before = len(list_images(out)) if out.is_dir() else 0
     start = time.perf_counter()

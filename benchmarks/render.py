@@ -35,7 +35,7 @@ def per_image_ms(images: int, warmup: int, size: int, spp: int) -> tuple[list[fl
     """Wall and CPU (all threads) milliseconds per image; CPU time is steadier on a shared machine."""
     from sasmi.dataset import write_one
     from sasmi.render.mitsuba import Renderer
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     preset = load_preset(PRESET)
     renderer = Renderer(size=size, spp=spp)
@@ -113,7 +113,7 @@ def main() -> None:
           f"mean {statistics.mean(times):.0f}; {len(times)} images); "
           f"CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
     if not args.no_povray:
-        from sasmi.scene import load_preset
+        from sasmi.preset import load_preset
 
         wall, pov_cpu = povray_ms(load_preset(PRESET).sample(0, 0), args.size)
         print(f"POV-Ray on the first of those scenes ({args.size}x{args.size}, 32 emitters, 3x3 jittered + centre ray, "

@@ -36,7 +36,7 @@ from sasmi.labels import categories_of, read_labels
 from sasmi.limits import FLAGS
 from sasmi.masks import write_class_mask, write_instance_mask
 from sasmi.preprocess import check_size
-from sasmi.scene import Preset
+from sasmi.preset import Preset
 
 if TYPE_CHECKING:
     from sasmi.render.mitsuba import Rendered

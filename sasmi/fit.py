@@ -41,7 +41,8 @@ from sasmi.errors import SasmiError
 from sasmi.images import list_images, write_text
 from sasmi.preprocess import check_size
 from sasmi.render.differentiable import PARAMETERS
-from sasmi.scene import SECTIONS, Preset, Scene
+from sasmi.preset import SECTIONS, Preset
+from sasmi.scene import Scene
 
 # preset fields each parameter scales: (section, key)
 PRESET_FIELDS = {
@@ -335,7 +336,7 @@ def fit_to_real(preset_path: str | os.PathLike, phi_run: str | os.PathLike, real
     """One call: fit `cfg.params` of a preset so its renders match the real chips' mean φ; write OUT."""
     from sasmi.gan.autoencoder import load_encoder
     from sasmi.render.llvm import versions
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     cfg.validate()
     preset = load_preset(preset_path)

@@ -2,7 +2,7 @@
 
 One table for command-line flags (FLAGS, keyed by the flag's name, which has one meaning
 in every command) and one for preset fields (FIELDS, keyed by "section.field"); the
-argparse types in sasmi/cli_types.py and the preset checks in sasmi/scene.py read them.
+argparse types in sasmi/cli_types.py and the preset checks in sasmi/scene_values.py read them.
 Lower bounds that are part of a preset field's meaning (> 0, in [0, 1]) stay beside the
 field in scene.py; this module adds the finite upper bounds and why they are where they are.
 

@@ -138,7 +138,7 @@ def fit(plan: FitPlan, device) -> Path:
     from sasmi.gan.kinds.autoencoder import AUTOENCODER
     from sasmi.gan.kinds.sasgan import SASGAN
     from sasmi.preprocess import check_size
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     check_size(plan.size)
     preset = load_preset(plan.preset)  # a bad preset and a bad recipe fail before anything is written

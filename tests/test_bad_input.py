@@ -267,7 +267,7 @@ def test_bad_preset_file(tmp_path, capsys, name):
 
 
 def test_preset_by_name_is_found():
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     assert load_preset("cylinder_chip").raw == load_preset(CYLINDER).raw
 

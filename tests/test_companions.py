@@ -9,7 +9,7 @@ import pytest
 
 from sasmi.errors import SasmiError
 from sasmi.render.mitsuba import render
-from sasmi.scene import Preset
+from sasmi.preset import Preset
 
 BASE = {
     "sonar": {"chip_size": 12.0, "near_range": 30.0},

@@ -17,7 +17,8 @@ from sasmi.cli import main
 from sasmi.errors import SasmiError
 from sasmi.render.geometry import build_geometry
 from sasmi.render.mitsuba import Renderer
-from sasmi.scene import Scene, Seafloor, Sonar, load_preset
+from sasmi.preset import load_preset
+from sasmi.scene import Scene, Seafloor, Sonar
 
 REPO = Path(__file__).resolve().parents[1]
 PRESETS = ("cylinder_chip", "muscle_paper", "target_field", "seafloor_only", "sas_physics")

@@ -14,7 +14,7 @@ from sasmi.fit import (FitConfig, central_difference, fit_scene, parse_params, p
                        scaled_preset)
 from sasmi.render.differentiable import PARAMETERS, DifferentiableRenderer, scene_parameters
 from sasmi.render.mitsuba import Renderer
-from sasmi.scene import Preset, load_preset
+from sasmi.preset import Preset, load_preset
 
 REPO = Path(__file__).resolve().parents[1]
 SIZE, SPP = 64, 4

@@ -12,7 +12,8 @@ import pytest
 from sasmi.errors import SasmiError
 from sasmi.render.annotate import MASK_SHADOW, MASK_TARGET
 from sasmi.render.mitsuba import Renderer
-from sasmi.scene import Post, Preset, Scene, Sonar, Target, load_preset
+from sasmi.preset import Preset, load_preset
+from sasmi.scene import Post, Scene, Sonar, Target
 
 from conftest import REPO, assert_matches_golden
 

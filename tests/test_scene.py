@@ -7,7 +7,7 @@ import pytest
 
 from sasmi.cli import main
 from sasmi.errors import SasmiError
-from sasmi.scene import Preset, load_preset
+from sasmi.preset import Preset, load_preset
 
 from conftest import REPO
 

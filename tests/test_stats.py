@@ -127,7 +127,7 @@ def test_real_chips_targets_found_where_they_are(real_chips):
 def renders(tmp_path_factory) -> Path:
     """8 chips of today's cylinder preset at 64 px, 4 spp."""
     from sasmi.dataset import RenderJob, render_set
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     out = tmp_path_factory.mktemp("stats") / "renders"
     render_set(RenderJob(preset=load_preset(Path(__file__).resolve().parents[1] / "scenes" / "cylinder_chip.toml"),

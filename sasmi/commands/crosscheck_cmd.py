@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.render.crosscheck import crosscheck, table, write
     from sasmi.errors import SasmiError
     from sasmi.render.llvm import versions
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     if args.index < 0:
         raise SasmiError(f"--index {args.index}: must be >= 0")

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.errors import SasmiError
     from sasmi.floors import floor_for, matching_floors, on_floor
     from sasmi.images import list_images
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
 
     if bool(args.floors) != bool(args.real):
         raise SasmiError("--floors and --real: give both (the floors are matched to the real target chips) or neither")

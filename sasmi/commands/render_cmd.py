@@ -66,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run_render(args: argparse.Namespace) -> int:
     from sasmi.dataset import RenderJob, missing, render_set
-    from sasmi.scene import load_preset
+    from sasmi.preset import load_preset
     from sasmi.shards import missing_shards, render_shards
 
     job = RenderJob(preset=load_preset(args.preset), out=args.out, count=args.count, seed=args.seed,
