@@ -31,7 +31,7 @@ class TargetKinds:
     (its own shapes and size ranges), and each of a chip's targets picks a kind with probability
     weight / (sum of weights). Without it, every table is one target of every chip."""
     targets_per_chip: int = spec(1, nonneg, ">= 0", "targets per chip, each drawn from the [[targets]] tables "
-                                  "by their weight")
+                                 "by their weight")
     weight: float = spec(1.0, nonneg, ">= 0", "a [[targets]] table's share of the draws (with targets_per_chip)")
 
 

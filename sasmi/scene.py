@@ -50,10 +50,10 @@ class Sonar:
     intensity: float = spec(1.0, positive, "> 0", "source level, relative to the calibrated exposure")
     altitude: float = spec(0.0, nonneg, ">= 0", "m; height of the array above the seafloor; 0 = max_range / 10")
     slant_range: bool = spec(False, None, "true or false", "image x axis in slant range from the track "
-                              "(layover, foreshortening), as a sonar forms images; false: ground range")
+                             "(layover, foreshortening), as a sonar forms images; false: ground range")
     aperture_angle: float = spec(0.0, lambda v: 0 <= v < 90, "in [0, 90)",
-                                  "deg; > 0: beams look broadside with this along-track width, so the synthetic "
-                                  "aperture grows with range (track_length is then derived); 0: spots aim at the chip")
+                                 "deg; > 0: beams look broadside with this along-track width, so the synthetic "
+                                 "aperture grows with range (track_length is then derived); 0: spots aim at the chip")
 
     @property
     def array_altitude(self) -> float:
@@ -73,11 +73,11 @@ class Seafloor:
     rocks: int = spec(0, nonneg, ">= 0", "number of rock/clutter bumps")
     rock_radius: float = spec(0.15, positive, "> 0", "m; size of each bump")
     backscatter: str = spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
-                             "scattering law: lambert (cos of incidence, as today), lambert2 (cos^2, Lambert's law), "
-                             "rough (cos^0.5, nearly even: rock and rubble)")
+                            "scattering law: lambert (cos of incidence, as today), lambert2 (cos^2, Lambert's law), "
+                            "rough (cos^0.5, nearly even: rock and rubble)")
     patchiness: float = spec(0.0, lambda v: 0 <= v <= 2, "in [0, 2]", "std / mean of the sediment's backscatter "
-                              "strength over the floor (a gamma texture under the speckle: K-distributed clutter); "
-                              "0 = uniform; above 2 most of the floor renders black")
+                             "strength over the floor (a gamma texture under the speckle: K-distributed clutter); "
+                             "0 = uniform; above 2 most of the floor renders black")
     patch_size: float = spec(1.0, positive, "> 0", "m; width (FWHM) of the patches of stronger and weaker backscatter")
 
 
@@ -90,35 +90,35 @@ class Target:
     burial: float = spec(0.0, nonneg, ">= 0", "m of the target's height below the local seafloor")
     length: float = spec(2.0, positive, "> 0", "m; cylinder length, cone height, box or boulder length (along its axis)")
     radius: float = spec(0.3, positive, "> 0", "m; cylinder/sphere radius, cone base radius, torus major radius "
-                          "(ring centre to tube centre)")
+                         "(ring centre to tube centre)")
     radius_top: float = spec(0.1, nonneg, ">= 0", "m; top radius of the truncated cone")
     width: float = spec(1.0, positive, "> 0", "m; box or boulder width (across its axis)")
     height: float = spec(0.5, positive, "> 0", "m; box or boulder height")
     lumpiness: float = spec(0.3, lambda v: 0 <= v < 0.9, "in [0, 0.9)", "boulder: how far its surface strays from "
-                             "a smooth ellipsoid: its largest lump as a share of its radius (the default preset: 0.4-0.85)")
+                            "a smooth ellipsoid: its largest lump as a share of its radius (the default preset: 0.4-0.85)")
     tube_radius: float = spec(0.15, positive, "> 0", "m; torus tube radius (a tyre lying flat: its height is twice this)")
     mesh: str = spec("", None, "", "OBJ/STL/PLY path (shape = 'mesh'), relative to the preset")
     scale: float = spec(1.0, positive, "> 0", "scale applied to a mesh file")
     albedo: float = spec(0.9, unit, "in [0, 1]")
     backscatter: str = spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
-                             "scattering law, as seafloor.backscatter: rough keeps a boulder's top bright at low grazing")
+                            "scattering law, as seafloor.backscatter: rough keeps a boulder's top bright at low grazing")
 
 
 @dataclass(frozen=True)
 class Post:
     gain: float = spec(0.45, positive, "> 0",
-                        "gray level of a flat albedo-1 seafloor at the chip centre lit by the array at intensity 1")
+                       "gray level of a flat albedo-1 seafloor at the chip centre lit by the array at intensity 1")
     speckle_looks: float = spec(0.0, nonneg, ">= 0", "L of gamma-distributed multiplicative speckle; 0 = off")
     noise_std: float = spec(0.0, nonneg, ">= 0", "std of additive Gaussian noise in gray levels (0..1)")
     tvg: bool = spec(True, None, "true or false",
-                      "time-varying gain: divide out the flat-floor spreading and grazing loss, as sonars do")
+                     "time-varying gain: divide out the flat-floor spreading and grazing loss, as sonars do")
     tvg_strength: float = spec(1.0, unit, "in [0, 1]",
-                                "share of the TVG (an exponent): 1 evens out a flat floor, below 1 a range fall-off remains")
+                               "share of the TVG (an exponent): 1 evens out a flat floor, below 1 a range fall-off remains")
     noise_floor: float = spec(0.0, nonneg, ">= 0",
-                               "gray level of the background under every echo (reverberation, ambient noise); "
-                               "speckled with it, it is the mean level of acoustic shadows")
+                              "gray level of the background under every echo (reverberation, ambient noise); "
+                              "speckled with it, it is the mean level of acoustic shadows")
     speckle_cell_range: float = spec(0.0, nonneg, ">= 0", "m; resolution cell along range; speckle is correlated "
-                                      "over it (0 = independent per pixel)")
+                                     "over it (0 = independent per pixel)")
     speckle_cell_track: float = spec(0.0, nonneg, ">= 0", "m; resolution cell along track (0 = independent per pixel)")
 
 
