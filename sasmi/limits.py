@@ -4,7 +4,8 @@ One table for command-line flags (FLAGS, keyed by the flag's name, which has one
 in every command) and one for preset fields (FIELDS, keyed by "section.field"); the
 argparse types in sasmi/cli_types.py and the preset checks in sasmi/scene_values.py read them.
 Lower bounds that are part of a preset field's meaning (> 0, in [0, 1]) stay beside the
-field in scene.py; this module adds the finite upper bounds and why they are where they are.
+field in scene.py (preset.py for target kinds and companions); this module adds the finite upper
+bounds and why they are where they are.
 
 Measured on the 2-core dev machine (scenes/cylinder_chip.toml; probe in docs/errors.md):
 a render costs ~0.5 kB of memory per pixel (1024 px: +0.5 GB for seafloor mesh, BVH and

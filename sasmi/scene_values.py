@@ -1,6 +1,6 @@
 """Preset values: the check of one field's value, distributions and their draws, reading a small file.
 
-A preset field is declared in sasmi/scene.py as a dataclass field whose metadata holds its
+A preset field is declared in sasmi/scene.py (or sasmi/preset.py) as a dataclass field whose metadata holds its
 `check` (a predicate for the bounds that are part of its meaning) and `allowed` (the words
 for them); sasmi/limits.py adds the finite upper bounds. Everything here works on any such
 dataclass, so it knows nothing of sonar, seafloor or targets.
