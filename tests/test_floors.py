@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sasmi.floors import FLOOR_CHOICES, fresh_speckle, matching_floors, on_floor
+from sasmi.floors import BANDS, FLOOR_CHOICES, fresh_floor, matching_floors, on_floor
 from sasmi.images import write_gray
 
 SIZE = 64
@@ -122,17 +122,44 @@ def test_matching_floors_picks_the_targets_range_fall_off(tmp_path):
     assert all(p.name.startswith("falling_") for p in picks), [p.name for p in picks]
 
 
-def test_fresh_speckle_keeps_the_seabed_and_not_the_pixels():
-    """A floor with bands along range and a bright patch: the same seabed, other speckle (the copying detector's pixels)."""
+def test_fresh_floor_keeps_the_seabed_and_not_the_pixels():
+    """A floor with bands along range and a bright patch: the same seabed up to a gain per row, other speckle
+    (the copying detector's pixels)."""
     from scipy.ndimage import gaussian_filter
 
     cols, rows = np.arange(SIZE)[None, :], np.arange(SIZE)[:, None]
     seabed = 0.15 + 0.2 * (cols / SIZE) + 0.15 * ((rows - 20) ** 2 + (cols - 40) ** 2 < 100)
     floor = np.clip(_speckle(1.0, 3) * seabed, 0, 1).astype(np.float32)
-    fresh = fresh_speckle(floor, np.random.default_rng(0))
+    fresh = fresh_floor(floor, floor, np.random.default_rng(0))
     assert fresh.shape == floor.shape and fresh.min() >= 0 and fresh.max() <= 1
     blur = lambda x: gaussian_filter(x.astype(np.float64), 4.0)
-    assert np.abs(blur(fresh) - blur(floor)).mean() < 0.1 * blur(floor).mean()      # the bands and the patch stay
-    speckle, new = floor / seabed - 1, fresh / seabed - 1
+    row_gain = np.median(blur(fresh) / blur(floor), axis=1, keepdims=True)            # the gain bands' share
+    assert np.abs(blur(fresh) / row_gain - blur(floor)).mean() < 0.1 * blur(floor).mean()  # bands, patch stay
+    speckle, new = floor / seabed - 1, fresh / (seabed * row_gain) - 1
     assert abs(np.corrcoef(speckle.ravel(), new.ravel())[0, 1]) < 0.2               # the pixels are not the chip's
     assert new.std() == pytest.approx(speckle.std(), rel=0.2)                       # at the chip's speckle strength
+
+
+def test_fresh_floor_lays_the_second_chips_speckle_on_the_first_chips_seabed():
+    """Seabed chip: level 0.4, one-look speckle; speckle chip: level 0.2, sixteen looks. The floor has the first's
+    level and the second's speckle strength (1/sqrt(looks))."""
+    seabed_chip = np.clip(_speckle(0.4, 1, looks=1.0), 0, 1)
+    speckle_chip = _speckle(0.2, 2, looks=16.0)
+    fresh = fresh_floor(seabed_chip, speckle_chip, np.random.default_rng(0)).astype(np.float64)
+    assert fresh.mean() == pytest.approx(seabed_chip.mean(), rel=0.25)                # not the second chip's 0.2
+    assert fresh.std() / fresh.mean() == pytest.approx(0.25, rel=0.3)               # not the first chip's 1.0
+
+
+def test_fresh_floor_swings_gain_along_track_and_not_along_range():
+    """Flat chips without speckle: what is left is the gain bands. Each row is flat along range, the rows
+    differ along track as slow swings (neighbouring rows alike), and their spread stays within BANDS."""
+    flat = np.full((SIZE, SIZE), 0.3, np.float32)
+    spreads = []
+    for seed in range(20):
+        rows = np.log(fresh_floor(flat, flat, np.random.default_rng(seed)).astype(np.float64) / 0.3)
+        assert np.allclose(rows, rows[:, :1], atol=1e-6)                           # nothing along range
+        profile = rows[:, 0]
+        spreads.append(profile.std())
+        if profile.std() > 0.02:
+            assert np.corrcoef(profile[:-1], profile[1:])[0, 1] > 0.9               # slow swings, not row noise
+    assert 0.03 < np.mean(spreads) and max(spreads) <= 1.2 * BANDS
