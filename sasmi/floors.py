@@ -43,9 +43,10 @@ LIFTS = 4            # lifts of the highlight towards it: the blur mixes the unl
 FLOOR_CHOICES = 2
 SEABED = 4.0         # px: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
 # gain swings along track: each floor's rows times exp(s * noise), s drawn in [0, BANDS], the noise of unit
-# spread and correlated over BAND_LENGTH px. The real chips the composites covered least show such bands; on
-# train alone (four nested splits of both splits' train chips) they raised the composites' recall of held-out
-# train targets by 0.08 for +0.04 of phi ratio, 0.10 for +0.015 with a second floor's speckle (docs/gan.md)
+# spread and correlated over BAND_LENGTH px. The real chips the composites covered least show such bands. On
+# train alone (four nested splits of both splits' train chips), with a second chip's speckle, they raised the
+# composites' recall of held-out train targets by 0.10 for +0.015 of phi ratio; stronger or longer bands bought
+# more recall at three times the ratio (docs/gan.md, *Gain bands*)
 BANDS = 0.15
 BAND_LENGTH = 8.0
 
