@@ -44,10 +44,10 @@ FLOOR_CHOICES = 2
 SEABED = 4.0         # px: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
 # gain swings along track: each floor's rows times exp(s * noise), s drawn in [0, BANDS], the noise of unit
 # spread and correlated over BAND_LENGTH px. The real chips the composites covered least show such bands. On
-# train alone (four nested splits of both splits' train chips), with a second chip's speckle, they raised the
-# composites' recall of held-out train targets by 0.10 for +0.015 of phi ratio; stronger or longer bands bought
-# more recall at three times the ratio (docs/gan.md, *Gain bands*)
-BANDS = 0.15
+# train alone (eight nested splits of both splits' train chips), with a second chip's speckle, s to 0.1 raised
+# the composites' recall of held-out train targets by 0.06 for +0.002 of phi ratio; s to 0.15 bought 0.11 for
+# +0.035, stronger or longer bands more recall at several times the ratio (docs/gan.md, *Gain bands*)
+BANDS = 0.1
 BAND_LENGTH = 8.0
 
 
