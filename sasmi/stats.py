@@ -40,12 +40,17 @@ STATISTICS = {
     "acf_range": ("1-px autocorr. along range", ""),
     "acf_track": ("1-px autocorr. along track", ""),
     "far_near": ("far-third / near-third", ""),
+    # a swath's gain swings from ping to ping; the floor chips blurred into a seabed keep only their own
+    # strip's, and the real chips the composites covered least showed rows brighter or darker as a whole
+    "bands": ("gain swing along track (log)", ""),
     "periodicity": ("floor periodicity (spectral peak / median)", ""),
     "shadow_floor": ("shadow level / floor level", ""),
     # real target chips are cut centred on the contact: a preset spread ±4.5 m along track put most
     # renders off them in φ while every other row matched (docs/realism.md, *Along track: centred*)
     "offset_track": ("target offset along track from the centre row", "px"),
 }
+SWING_LAG = 3        # rows: past the speckle's correlation along track (acf at 1 px about 0.3-0.6)
+SWING_TREND = 32.0   # rows: slower swings are the seabed's, not the gain's
 MASK_STATISTICS = ("shadow_length", "shadow_width", "highlight_length", "highlight_width")
 
 
@@ -135,6 +140,34 @@ def _box_mask(shape: tuple[int, int], boxes, pad: int) -> np.ndarray:
     return m
 
 
+def profile_swing(log_profile: np.ndarray, valid: np.ndarray | None = None, scale: float = 1.0) -> float:
+    """The swings of a log row profile (rows along track): the square root of its autocovariance at
+    SWING_LAG rows, after the trend over SWING_TREND rows is removed (both at 128 px, times `scale`).
+    A row median's speckle noise is correlated over a row or two, so the lag leaves it out; 0 when the
+    covariance is negative. `valid` (rows,) bool: the rows that count."""
+    valid = np.ones(log_profile.shape, bool) if valid is None else valid
+    lag = max(1, round(SWING_LAG * scale))
+    if valid.sum() <= lag + 2:
+        return float("nan")
+    filled = np.where(valid, log_profile, np.median(log_profile[valid]))
+    detrended = filled - ndimage.gaussian_filter1d(filled, SWING_TREND * scale, mode="reflect")
+    pairs = valid[:-lag] & valid[lag:]
+    if not pairs.any():
+        return float("nan")
+    return float(np.sqrt(max(np.mean((detrended[:-lag] * detrended[lag:])[pairs]), 0.0)))
+
+
+def gain_swing(image01: np.ndarray, floor: np.ndarray | None = None) -> float:
+    """`profile_swing` of the log of each row's median over the floor (rows with a quarter of it or more)."""
+    h, w = image01.shape
+    floor = np.ones(image01.shape, bool) if floor is None else floor
+    log_image = np.log(np.maximum(image01.astype(np.float64), 1.0 / 255.0))
+    counts = floor.sum(axis=1)
+    valid = counts >= w // 4
+    profile = np.array([np.median(log_image[r][floor[r]]) if valid[r] else 0.0 for r in range(h)])
+    return profile_swing(profile, valid, w / 128.0)
+
+
 def speckle_looks(image01: np.ndarray, floor: np.ndarray, block: int) -> float:
     """Median over floor blocks of mean² / variance (the equivalent number of looks)."""
     h, w = image01.shape
@@ -213,6 +246,7 @@ def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[
     out["looks"] = speckle_looks(image01, floor, max(4, round(est.block * s)))
     out["acf_range"], out["acf_track"] = floor_autocorrelation(image01, floor, est.highpass_sigma * s)
     out["periodicity"] = floor_periodicity(image01, floor, est.highpass_sigma * s, s)
+    out["bands"] = gain_swing(image01, floor)
     third = w // 3
     near, far = image01[:, :third][floor[:, :third]], image01[:, -third:][floor[:, -third:]]
     if near.size and far.size and np.median(near) > 0:

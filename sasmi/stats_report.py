@@ -68,6 +68,8 @@ def _number(x: float, key: str) -> str:
         return "—"
     if key in WHOLE_NUMBERS:
         return f"{x:.0f}"
+    if key == "bands":
+        return f"{x:.3f}"
     return f"{x:.1f}" if key in ("looks", "periodicity", "offset_track") else f"{x:.2f}"
 
 

@@ -12,7 +12,7 @@ from scipy import ndimage, stats as sps
 from sasmi.cli import main
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
-from sasmi.stats import chip_statistics, find_target, image_statistics
+from sasmi.stats import chip_statistics, find_target, image_statistics, profile_swing
 from sasmi.stats_report import TOLERANCES, check, table
 
 SIZE = 128
@@ -98,6 +98,26 @@ def test_correlated_speckle_and_range_falloff():
     saturated = FLOOR * speckle(rng)
     saturated[:8, :16] = 1.0  # 128 px of 16384
     assert abs(image_statistics(saturated)["saturated"] - 100 * 128 / SIZE ** 2) < 0.05
+
+
+def test_gain_swings_along_track_read_as_bands_and_a_target_or_range_fall_off_does_not():
+    """Rows times exp(g), g smooth along track: the chip reads g's own swing; speckle alone, a target's rows
+    and a fall-off along range read (nearly) none."""
+    rng = np.random.default_rng(5)
+    g = ndimage.gaussian_filter1d(rng.standard_normal(SIZE + 64), 8.0)[32:-32]
+    g *= 0.12 / g.std()
+    banded = image_statistics(FLOOR * np.exp(g)[:, None] * speckle(rng))["bands"]
+    assert banded == pytest.approx(profile_swing(g), abs=0.015) and banded > 0.06, (banded, profile_swing(g))
+    # speckle correlated over two rows, as real speckle is along track (acf about 0.2 at 1 px): a lag of one
+    # row reads its row medians' noise as a swing (median 0.025 over these chips), the lag of three does not
+    def speckle_along_track():
+        field = sum(np.abs(ndimage.uniform_filter1d(rng.normal(size=(SIZE, SIZE)), 2, axis=0)
+                           + 1j * ndimage.uniform_filter1d(rng.normal(size=(SIZE, SIZE)), 2, axis=0)) ** 2
+                    for _ in range(4))
+        return field / field.mean()
+    assert np.median([image_statistics(FLOOR * speckle_along_track())["bands"] for _ in range(12)]) < 0.01
+    assert image_statistics(target_chip(rng))["bands"] < 0.02
+    assert image_statistics(FLOOR * np.linspace(1.0, 0.6, SIZE)[None, :] * speckle(rng))["bands"] < 0.02
 
 
 def test_ripples_raise_the_floor_periodicity_and_banding_does_not():
