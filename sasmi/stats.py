@@ -49,7 +49,7 @@ STATISTICS = {
     # renders off them in φ while every other row matched (docs/realism.md, *Along track: centred*)
     "offset_track": ("target offset along track from the centre row", "px"),
 }
-SWING_LAG = 3        # rows: past the speckle's correlation along track (acf at 1 px about 0.3-0.6)
+SWING_LAG = 3        # rows: past the speckle's correlation along track (real chips' 1-px acf about 0.2-0.35)
 SWING_TREND = 32.0   # rows: slower swings are the seabed's, not the gain's
 MASK_STATISTICS = ("shadow_length", "shadow_width", "highlight_length", "highlight_width")
 
@@ -158,7 +158,8 @@ def profile_swing(log_profile: np.ndarray, valid: np.ndarray | None = None, scal
 
 
 def gain_swing(image01: np.ndarray, floor: np.ndarray | None = None) -> float:
-    """`profile_swing` of the log of each row's median over the floor (rows with a quarter of it or more)."""
+    """`profile_swing` of the log of each row's median over the floor, on rows with a quarter of their pixels
+    or more on it."""
     h, w = image01.shape
     floor = np.ones(image01.shape, bool) if floor is None else floor
     log_image = np.log(np.maximum(image01.astype(np.float64), 1.0 / 255.0))
