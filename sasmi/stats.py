@@ -140,12 +140,11 @@ def _box_mask(shape: tuple[int, int], boxes, pad: int) -> np.ndarray:
     return m
 
 
-def profile_swing(log_profile: np.ndarray, valid: np.ndarray | None = None, scale: float = 1.0) -> float:
+def profile_swing(log_profile: np.ndarray, valid: np.ndarray, scale: float) -> float:
     """The swings of a log row profile (rows along track): the square root of its autocovariance at
     SWING_LAG rows, after the trend over SWING_TREND rows is removed (both at 128 px, times `scale`).
     A row median's speckle noise is correlated over a row or two, so the lag leaves it out; 0 when the
     covariance is negative. `valid` (rows,) bool: the rows that count."""
-    valid = np.ones(log_profile.shape, bool) if valid is None else valid
     lag = max(1, round(SWING_LAG * scale))
     if valid.sum() <= lag + 2:
         return float("nan")
@@ -157,11 +156,10 @@ def profile_swing(log_profile: np.ndarray, valid: np.ndarray | None = None, scal
     return float(np.sqrt(max(np.mean((detrended[:-lag] * detrended[lag:])[pairs]), 0.0)))
 
 
-def gain_swing(image01: np.ndarray, floor: np.ndarray | None = None) -> float:
+def gain_swing(image01: np.ndarray, floor: np.ndarray) -> float:
     """`profile_swing` of the log of each row's median over the floor, on rows with a quarter of their pixels
     or more on it."""
     h, w = image01.shape
-    floor = np.ones(image01.shape, bool) if floor is None else floor
     log_image = np.log(np.maximum(image01.astype(np.float64), 1.0 / 255.0))
     counts = floor.sum(axis=1)
     valid = counts >= w // 4
