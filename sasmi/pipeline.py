@@ -15,6 +15,7 @@ stages resume from their last checkpoint) and a larger --minutes trains on.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import asdict, dataclass, replace
@@ -26,6 +27,7 @@ from sasmi.images import list_images, write_text
 STAGES = ("phi", "renders", "floors", "sasgan", "translated", "report")
 # shares of --minutes for the two trainings; rendering, translating and the report take what they take
 SHARE = {"phi": 0.2, "sasgan": 0.7}
+MIN_CHUNK_SECONDS = 60  # less GAN time than this left in the budget is not worth a chunk
 FIRST_CHUNK = 20  # steps trained before the speed is known
 
 
@@ -183,7 +185,11 @@ def fit(plan: FitPlan, device) -> Path:
         onto_real_floors(out / "renders", plan.floors, plan.real, plan.gan_input, plan.size, plan.seed)
         state.add("floors", time.monotonic() - started, done=True)
 
-    if "sasgan" not in state.done or stage_time("sasgan") > 60:
+    if "sasgan" in state.done and stage_time("sasgan") <= MIN_CHUNK_SECONDS:
+        # a rerun, perhaps with a budget raised too little to train on: say so, and what would
+        least = (state.seconds.get("sasgan", 0.0) + MIN_CHUNK_SECONDS) / SHARE["sasgan"] / 60
+        _log("sasgan", f"trained; --minutes {math.floor(least * 10) / 10 + 0.1:g} or more trains on", plan, state.used)
+    else:
         _log("sasgan", f"training on {plan.real} and {plan.gan_input.name}", plan, state.used)
         train_for(SASGAN, {**gan_settings, "size": plan.size, "seed": plan.seed}, out / "sasgan",
                   {"real": plan.real, "renders": plan.gan_input, "phi": phi}, device, stage_time("sasgan"),

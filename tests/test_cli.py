@@ -21,8 +21,8 @@ def test_every_help_names_every_default():
             # by identity: a default of 0 equals False and must still be shown
             no_default = any(action.default is nothing for nothing in (None, False, argparse.SUPPRESS)) \
                 or action.default == ""
-            if action.option_strings and not no_default and action.help not in (None, argparse.SUPPRESS):
-                text = parser._get_formatter()._expand_help(action)
+            if action.option_strings and not no_default and action.help is not argparse.SUPPRESS:
+                text = parser._get_formatter()._expand_help(action) if action.help else ""  # no help: no default either
                 if "default" not in text:
                     missing.append(f"{parser.prog} {action.option_strings[0]}")
     assert not missing, missing

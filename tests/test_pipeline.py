@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import torch
 
+from sasmi import pipeline
 from sasmi.cli import main
 from sasmi.images import read_gray, write_gray
 
@@ -47,6 +49,11 @@ def test_fit_runs_every_stage_then_resumes_without_retraining(tmp_path, capsys):
     stamp = last.stat().st_mtime_ns
     assert main(argv) == 0  # a rerun finds every stage done
     assert last.stat().st_mtime_ns == stamp
+    # ... and says by how much --minutes must grow before the GAN trains on: a budget raised less changes nothing
+    said = re.search(r"trained; --minutes ([0-9.]+) or more trains on", capsys.readouterr().err)
+    gan_seconds = json.loads((out / "fit.json").read_text())["seconds"]["sasgan"]
+    assert said and pipeline.SHARE["sasgan"] * float(said[1]) * 60 - gan_seconds > pipeline.MIN_CHUNK_SECONDS
+    assert pipeline.SHARE["sasgan"] * (float(said[1]) - 0.1) * 60 - gan_seconds <= pipeline.MIN_CHUNK_SECONDS
 
     assert main([*argv[:-2], "--preset", "seafloor_only"]) == 2  # another plan into the same folder
     assert "only --minutes may change" in capsys.readouterr().err

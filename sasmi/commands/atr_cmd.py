@@ -29,9 +29,18 @@ def _count(lo: int, hi: int):
     return parse
 
 
+class _DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
+    """Each flag's default, but none for required flags and those whose help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.required or action.default in (None, [None]):
+            return action.help
+        return super()._get_help_string(action)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     e = sub.add_parser("export", help="write a render set's labels as COCO JSON or YOLO (ultralytics) files",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                       formatter_class=_DefaultsHelp,
                        description="COCO: one JSON (bbox, RLE instance masks, categories) that pycocotools loads; "
                                    "YOLO: images/, labels/ and data.yaml in the ultralytics layout "
                                    "(every tenth chip in val).")
@@ -41,7 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     e.set_defaults(run=run_export)
 
     a = sub.add_parser("atr-bench", help="does synthetic data help a target/seafloor classifier on real chips?",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                       formatter_class=_DefaultsHelp,
                        description="Trains a small fixed CNN on real, real+synthetic and synthetic(+real seafloor) "
                                    "chips over several seeds and scores it on real test chips (accuracy, ROC AUC).")
     a.add_argument("--real-train", type=Path, required=True, help="folder with targets/ and seafloor/")
@@ -49,11 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--synthetic", type=Path, required=True,
                    help="synthetic target chips (a render set, a translation, or a folder with targets/ [and seafloor/])")
     a.add_argument("--out", type=Path, required=True, help="folder for metrics.json, table.md, atr_bench.png")
-    a.add_argument("--seeds", type=_count(1, 100), default=5)
+    a.add_argument("--seeds", type=_count(1, 100), default=5, help="runs per training set, each with its own seed")
     a.add_argument("--size", type=_count(16, 1024), default=128, help="chip size in px, a multiple of 16")
     a.add_argument("--steps", type=_count(1, 100_000), default=300, help="training batches per run")
     a.add_argument("--real-per-class", type=_per_class, nargs="+", default=[None], metavar="N|all",
-                   help="real training chips drawn per class and seed; several values run several benches")
+                   help="real training chips drawn per class and seed (default: all); several values run several benches")
     a.set_defaults(run=run_atr_bench)
 
 
