@@ -32,7 +32,7 @@ from sasmi import __version__
 from sasmi.claims import Claims
 from sasmi.errors import SasmiError
 from sasmi.images import FORMATS, write_gray, write_text
-from sasmi.labels import categories_of, read_labels
+from sasmi.labels import ChipLabel, categories_of, read_labels
 from sasmi.limits import FLAGS
 from sasmi.masks import write_class_mask, write_instance_mask
 from sasmi.preprocess import check_size
@@ -231,14 +231,16 @@ Transform = Callable[[np.ndarray, np.ndarray, list[int]], np.ndarray]  # (images
 
 
 def render_set(job: RenderJob, transform: Transform | None = None, identity: dict | None = None,
-               batch: int = 16, progress: bool = True) -> Path:
+               batch: int = 16, progress: bool = True,
+               relabel: Callable[[ChipLabel, int], ChipLabel] | None = None) -> Path:
     """Render this job's scenes (0..count-1, or its --shard) into job.out; returns job.out.
 
     Other processes may render into the same folder at the same time: each chip is claimed
     first (sasmi.claims), and labels.jsonl is assembled by whoever finds every chip complete.
     `transform` (e.g. a GAN generator) maps each batch of rendered images before they are
-    written; masks and labels are the render's. `identity` joins the run record, so a
-    resumed run must use the same transform (e.g. the same generator checkpoint).
+    written; masks are the render's, and so are labels but for what `relabel` (label, scene
+    index) changes, as a transform that replaces the floor must. `identity` joins the run
+    record, so a resumed run must use the same transform (e.g. the same generator checkpoint).
     """
     job = prepare(job, identity)
     claims = Claims(job.out / "claims")
@@ -271,6 +273,8 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
                                        np.stack([rendered.mask for _, rendered in chunk]),   # (B, H, W) uint8
                                        [index for index, _ in chunk])
                     for (index, rendered), image in zip(chunk, images):
+                        if relabel is not None:
+                            rendered = replace(rendered, label=relabel(rendered.label, index))
                         write_one(job.out, index, image, rendered, job.image_format)
                 for index, _ in chunk:
                     claims.release(_name(index))

@@ -19,6 +19,7 @@ real swaths show (`fresh_floor`).
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,8 @@ from scipy import ndimage
 
 from sasmi.errors import SasmiError
 from sasmi.eval.config import PreservationConfig
-from sasmi.images import list_images, write_gray
+from sasmi.images import list_images, write_gray, write_text
+from sasmi.labels import ChipLabel, read_labels
 from sasmi.stats import chip_statistics, floor_level
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor. far_near: the
@@ -148,17 +150,33 @@ def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Gene
     return np.clip(seabed * np.roll(speckle, shift, axis=0), 0.0, 1.0).astype(np.float32)
 
 
+def _draw(choices: list[Path], seed: int, index: int) -> tuple[np.random.Generator, Path, Path, bool]:
+    """Chip `index`'s floor chips (seabed, speckle), whether the seabed is flipped, and the stream that goes on."""
+    rng = np.random.default_rng([seed, index])
+    seabed, speckle = (choices[i] for i in rng.integers(len(choices), size=2))
+    return rng, seabed, speckle, bool(rng.random() < 0.5)
+
+
 def floor_for(choices: list[Path], seed: int, index: int, size: int) -> np.ndarray:
     """(size, size) in [0, 1]: chip `index`'s floor, the seabed of one chip of `choices` (flipped up-down
     half the time: along track has no direction) under the speckle of another (`fresh_floor`), from a
     stream seeded by (seed, index) alone: the same in any batch."""
     from sasmi.preprocess import load_image
 
-    rng = np.random.default_rng([seed, index])
-    seabed_chip, speckle_chip = (load_image(choices[i], size) for i in rng.integers(len(choices), size=2))
-    if rng.random() < 0.5:
+    rng, seabed, speckle, flipped = _draw(choices, seed, index)
+    seabed_chip, speckle_chip = load_image(seabed, size), load_image(speckle, size)
+    if flipped:
         seabed_chip = seabed_chip[::-1]
     return fresh_floor(seabed_chip, speckle_chip, rng)
+
+
+def floor_label(label: ChipLabel, choices: list[Path], seed: int, index: int) -> ChipLabel:
+    """A render's label for its composite on `floor_for(choices, seed, index)`: the geometry holds, but the
+    rendered floor's rocks are gone (the composite keeps only the target and shadow masks), so its clutter goes,
+    and which real chips made the floor is recorded. `seafloor` and `post` still say how the render was drawn."""
+    _, seabed, speckle, flipped = _draw(choices, seed, index)
+    floor = {"seabed": str(seabed), "speckle": str(speckle), "seabed_flipped": flipped}
+    return replace(label, clutter=(), extra={**label.extra, "floor": floor})
 
 
 def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targets: str | os.PathLike,
@@ -187,4 +205,8 @@ def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targ
             raise SasmiError(f"{renders / 'masks' / path.stem}.png: mask {mask.shape} against image {render.shape}")
         write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor))
     carry_labels(renders, out)
+    if (out / "labels.jsonl").is_file():
+        position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_for(..., i)
+        labels = [floor_label(label, choices, seed, position[Path(label.image).stem]) for label in read_labels(out)]
+        write_text(out / "labels.jsonl", "".join(label.dumps() + "\n" for label in labels))
     return len(paths)

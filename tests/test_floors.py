@@ -163,3 +163,23 @@ def test_fresh_floor_swings_gain_along_track_and_not_along_range():
         if profile.std() > 0.02:
             assert np.corrcoef(profile[:-1], profile[1:])[0, 1] > 0.9               # slow swings, not row noise
     assert 0.03 < np.mean(spreads) and max(spreads) <= 1.2 * BANDS
+
+
+def test_floor_label_names_the_chips_floor_for_lays_and_drops_the_renders_rocks(tmp_path):
+    from sasmi.floors import floor_for, floor_label
+    from sasmi.labels import ChipLabel
+
+    # four floor chips told apart by their level: the composite's floor level says which was its seabed
+    choices = []
+    for i, level in enumerate((0.1, 0.2, 0.4, 0.8)):
+        write_gray(tmp_path / f"f{i}.png", np.full((32, 32), level, np.float32))
+        choices.append(tmp_path / f"f{i}.png")
+    rock = {"kind": "rock", "pixel_centre": [5.0, 5.0], "radius": 2.0, "bbox": [3, 3, 8, 8]}
+    label = ChipLabel(index=0, size=32, scene={"seed": 1}, clutter=(rock,), extra={"kept": 1})
+    for index in range(8):
+        floor = floor_label(label, choices, seed=3, index=index).extra["floor"]
+        seabed_level = float(np.median(floor_for(choices, 3, index, 32)))
+        assert floor["seabed"] == str(choices[int(np.argmin([abs(seabed_level - lv) for lv in (0.1, 0.2, 0.4, 0.8)]))])
+    relabelled = floor_label(label, choices, seed=3, index=0)
+    assert relabelled.clutter == () and relabelled.extra["kept"] == 1 and relabelled.scene == label.scene
+    assert "clutter" not in relabelled.to_json() and relabelled.to_json()["floor"]["speckle"] in map(str, choices)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -118,6 +119,16 @@ def test_generate_on_floors_makes_what_fit_translates(tmp_path, generator_runs, 
     plain = np.stack([read_gray(render_set / "images" / f"{i:06d}.png") for i in range(4)])
     off_floor = np.abs(generated - translate(load_generator(generator_runs[0], CPU), plain))
     assert off_floor.mean() > 5 / 255  # the floors are not the renders'
+
+    # labels: the render's rocks are not on the real floor, so neither set lists them; both name chip i's floor
+    from sasmi.labels import read_labels
+    rendered = read_labels(render_set)[:4]
+    assert any(label.clutter for label in rendered)  # else this test could not see clutter carried over
+    for made in (read_labels(out), read_labels(on_floors)[:4]):
+        assert not any(label.clutter for label in made)
+        assert [label.extra["floor"] for label in made] == [label.extra["floor"] for label in read_labels(on_floors)[:4]]
+        assert all(label.targets == r.targets for label, r in zip(made, rendered))  # the geometry holds
+    assert {Path(label.extra["floor"]["seabed"]).parent for label in read_labels(out)} == {floors}
 
 
 def test_generate_floors_without_real_is_one_line(tmp_path, capsys):

@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     from sasmi.dataset import RenderJob, render_set
     from sasmi.errors import SasmiError
-    from sasmi.floors import floor_for, matching_floors, on_floor
+    from sasmi.floors import floor_for, floor_label, matching_floors, on_floor
     from sasmi.images import list_images
     from sasmi.preset import load_preset
 
@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
         return translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
 
-    render_set(job, transform=transform, identity=identity, batch=args.batch)
+    relabel = (lambda label, i: floor_label(label, floors, args.seed, i)) if floors else None
+    render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel)
     print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}")
     return 0
