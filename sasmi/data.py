@@ -42,7 +42,9 @@ class RenderSet(torch.utils.data.Dataset):
       boxes (N, 4) float32 xyxy in pixels, labels (N,) int64 class ids (1-based, see
       `categories`), masks (N, H, W) uint8 instance masks, shadow_masks (N, H, W) uint8
       (shadow n belongs to target n), class_mask (H, W) int64 (0 seafloor, 1 target,
-      2 shadow), image_id int64, and `scene` (the sampled parameters, a dict).
+      2 shadow), companion (N,) bool (another object in view, not the contact the chip
+      is cut around: `sasmi.scene.Target.role`), image_id int64, and `scene` (the sampled
+      parameters, a dict).
     Targets the camera cannot see (fully buried or hidden) have no box and are left out
     of the tensors; they stay in `scene`.
     """
@@ -87,6 +89,7 @@ class RenderSet(torch.utils.data.Dataset):
             "shadow_masks": torch.from_numpy(np.stack([shadows == k + 1 for k in shown]).astype(np.uint8)
                                              if shown else np.zeros((0, h, w), np.uint8)),
             "class_mask": torch.from_numpy(classes.astype(np.int64)),
+            "companion": torch.tensor([label.targets[k].role == "companion" for k in shown], dtype=torch.bool),
             "image_id": torch.tensor(label.index, dtype=torch.int64),
             "scene": {**label.scene, "targets": [t.to_json() for t in label.targets]},
         }

@@ -57,6 +57,11 @@ class TargetLabel:
         return str(self.params.get("shape", ""))
 
     @property
+    def role(self) -> str:
+        """"target", or "companion": another object in view (sasmi.scene.Target.role; labels before it: target)."""
+        return str(self.params.get("role", "target"))
+
+    @property
     def category(self) -> str:
         """The class name an ATR model learns: the shape, or a mesh file's stem."""
         if self.shape == "mesh" and self.params.get("mesh"):

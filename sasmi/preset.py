@@ -146,7 +146,8 @@ class Preset:
                 x, y = (float(v) for v in rng.uniform(-half, half, size=2))
                 if all(math.hypot(x - tx, y - ty) >= c.clearance for tx, ty in taken):
                     taken.append((x, y))
-                    companions.append(sample_table(Target, tables[k], rng, f"companions.kinds[{k}]", x=x, y=y))
+                    companions.append(sample_table(Target, tables[k], rng, f"companions.kinds[{k}]", x=x, y=y,
+                                                       role="companion"))
                     names += (f"companions.kinds[{k}]",)
                     break
         return companions, names

@@ -21,6 +21,7 @@ from sasmi.scene_values import check_mesh_file
 
 SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "boulder", "mesh")
 BACKSCATTER = ("lambert", "lambert2", "rough")
+ROLES = ("target", "companion")
 
 
 def positive(v: float) -> bool:
@@ -102,6 +103,10 @@ class Target:
     albedo: float = spec(0.9, unit, "in [0, 1]")
     backscatter: str = spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
                             "scattering law, as seafloor.backscatter: rough keeps a boulder's top bright at low grazing")
+    # an ATR model learns contacts, and a real chip is cut around one: a companion of the same shape (another
+    # pipe, a boulder) is clutter to it, so labels and exports say which is which
+    role: str = spec("target", lambda v: v in ROLES, "one of " + ", ".join(ROLES),
+                     "the contact the chip is cut around, or another object in view ([companions] draws those)")
 
 
 @dataclass(frozen=True)

@@ -225,6 +225,8 @@ def companion_kinds(raw: Any, settings: type, kinds: type, target: type) -> tupl
             if key in t:
                 raise SasmiError(f"{where}.{key}: companions are placed at random over the chip "
                                  "(allowed: leave x and y out; companions.clearance keeps them apart)")
+        if "role" in t:
+            raise SasmiError(f"{where}.role: every companion has the role companion (allowed: leave role out)")
         plain.append({k: v for k, v in t.items() if k != "weight"})
         check_table(target, plain[-1], where)
     return settings_raw, plain, probabilities

@@ -64,6 +64,29 @@ def test_companions_render_with_their_own_masks_and_labels():
     assert [t.category for t in labels] == [t.shape for t in scene.targets] and len(labels) == 2
     assert all(t.visible_pixels > 0 for t in labels)
     assert {int(v) for v in np.unique(out.instances)} >= {1, 2}  # each object its own instance
+    assert [t.role for t in labels] == ["target", "companion"] and out.label.to_json()["targets"][1]["role"] == "companion"
+
+
+def test_exports_tell_companions_from_the_target_and_can_leave_them_out(tmp_path):
+    """An ATR model learns contacts: a companion boulder is clutter, though labelled by its shape."""
+    import json
+
+    from sasmi.data import RenderSet
+    from sasmi.dataset import RenderJob, render_set
+    from sasmi.export import export_coco, export_yolo
+
+    renders = render_set(RenderJob(preset=with_companions(share=1.0, most=2), out=tmp_path / "set", count=3,
+                                   size=32, spp=2), progress=False)
+    chips = RenderSet(renders)
+    flags = [chips[i][1]["companion"].tolist() for i in range(len(chips))]
+    assert all(f[0] is False and len(f) > 1 and all(f[1:]) for f in flags)  # the target first, then 1-2 companions
+    coco = json.loads(export_coco(renders, tmp_path / "all.json").read_text())
+    assert [a["role"] for a in coco["annotations"]] == ["companion" if c else "target" for f in flags for c in f]
+    only = json.loads(export_coco(renders, tmp_path / "targets.json", companions=False).read_text())
+    assert [a["role"] for a in only["annotations"]] == ["target"] * 3
+    assert [a["bbox"] for a in only["annotations"]] == [a["bbox"] for a in coco["annotations"] if a["role"] == "target"]
+    lines = [len(p.read_text().splitlines()) for p in sorted(export_yolo(renders, tmp_path / "y", companions=False).rglob("*.txt"))]
+    assert lines == [1, 1, 1]
 
 
 @pytest.mark.parametrize("settings, message", [
@@ -73,6 +96,7 @@ def test_companions_render_with_their_own_masks_and_labels():
     ({"clearance": 12.0}, "companions.clearance: 12 m leaves no room on a 12 m chip"),
     ({"kinds": []}, "companions.kinds: expected at least one [[companions.kinds]] table"),
     ({"kinds": [{"shape": "sphere", "x": 1.0}]}, "companions.kinds[0].x: companions are placed at random"),
+    ({"kinds": [{"shape": "sphere", "role": "target"}]}, "companions.kinds[0].role: every companion has the role"),
     ({"kinds": [{"shape": "sphere", "weight": 0}]}, "companions.kinds: every weight is 0"),
     ({"kinds": [{"shape": "sphere", "radius": -1}]}, "companions.kinds[0].radius: -1.0 is not allowed"),
     ({"kinds": [{"shape": "box", "height": 0.3, "burial": 0.5}]}, "companions.kinds[0].burial: 0.5 m buries"),

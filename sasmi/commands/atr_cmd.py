@@ -33,7 +33,7 @@ class _DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
     """Each flag's default, but none for required flags and those whose help already says it."""
 
     def _get_help_string(self, action: argparse.Action) -> str:
-        if action.required or action.default in (None, [None]):
+        if action.required or action.default in (None, [None]) or "default" in (action.help or ""):
             return action.help
         return super()._get_help_string(action)
 
@@ -47,6 +47,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("folder", type=Path, help="render set (images/, masks/, instances/, labels.jsonl)")
     e.add_argument("--format", dest="label_format", choices=["coco", "yolo"], required=True)
     e.add_argument("--out", type=Path, required=True, help="COCO: the JSON file; YOLO: a folder")
+    e.add_argument("--no-companions", dest="companions", action="store_false",
+                   help="leave out the other objects in view (each target's role: companion), which are otherwise "
+                        "labelled by their shape like the contact each chip is cut around (default: kept)")
     e.set_defaults(run=run_export)
 
     a = sub.add_parser("atr-bench", help="does synthetic data help a target/seafloor classifier on real chips?",
@@ -69,7 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_export(args: argparse.Namespace) -> int:
     from sasmi.export import export_coco, export_yolo
 
-    out = (export_coco if args.label_format == "coco" else export_yolo)(args.folder, args.out)
+    out = (export_coco if args.label_format == "coco" else export_yolo)(args.folder, args.out, args.companions)
     print(f"wrote {out}")
     return 0
 
