@@ -299,6 +299,6 @@ def assemble_labels(out: Path, count: int) -> None:
     # class ids for ATR tools (id = position + 1), known only once every chip is drawn
     run_json = out / "run.json"
     record = json.loads(run_json.read_text())
-    record["categories"] = categories_of(read_labels(out))
+    record["categories"] = categories_of(read_labels(out), record.get("preset"))
     write_text(run_json, json.dumps(record, indent=2))
 

@@ -132,10 +132,32 @@ class ChipLabel:
 BUILTIN_CATEGORIES = ("cylinder", "sphere", "cone", "box", "torus", "boulder")
 
 
-def categories_of(labels: list[ChipLabel]) -> list[str]:
-    """Class names in id order (id = position + 1; 0 is the background): built-in shapes first, then meshes."""
-    found = {t.category for label in labels for t in label.targets}
+def categories_of(labels: list[ChipLabel], preset: dict | None = None) -> list[str]:
+    """Class names in id order (id = position + 1; 0 is the background): built-in shapes first, then meshes.
+
+    With the preset's raw tables, every mesh it can draw counts, drawn in these chips or not: two sets
+    of one preset then give a mesh the same id, however few chips each holds.
+    """
+    found = {t.category for label in labels for t in label.targets} | (_mesh_stems(preset) if preset else set())
     return [c for c in BUILTIN_CATEGORIES] + sorted(found - set(BUILTIN_CATEGORIES))
+
+
+def _mesh_stems(table: Any) -> set[str]:
+    """Stems of every `mesh` anywhere in a preset's raw tables: a path, or the paths of a {choice = [...]}."""
+    if isinstance(table, list):
+        return set().union(*map(_mesh_stems, table))
+    if not isinstance(table, dict):
+        return set()
+    stems = set()
+    for key, value in table.items():
+        if key != "mesh":
+            stems |= _mesh_stems(value)
+        elif isinstance(value, str):
+            stems.add(Path(value).stem)
+        elif isinstance(value, dict):  # a distribution: its one entry lists the choices
+            stems |= {Path(v).stem for values in value.values() if isinstance(values, list)
+                      for v in values if isinstance(v, str)}
+    return stems - {""}
 
 
 def target_geometry(sonar: dict, x: float, y: float) -> dict:

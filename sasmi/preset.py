@@ -90,6 +90,8 @@ class Preset:
         rng = np.random.default_rng(0)  # and on one draw of every kind, which one chip may not pick
         for where, t in kinds.items():
             kind = sample_table(Target, t, rng, where)
+            if kind.shape == "mesh" and kind.mesh:  # as `sample` does: relative to the preset's folder
+                kind = dataclasses.replace(kind, mesh=str(preset.resolve_mesh(kind.mesh)))
             dataclasses.replace(scene, targets=(kind,)).validate(names=(where,))
         return preset
 

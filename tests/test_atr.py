@@ -131,3 +131,25 @@ def test_atr_bench_bad_input_is_one_line(tmp_path, capsys):
                  "--synthetic", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--real-train" in err[0] and not (tmp_path / "o").exists()
+
+
+def test_a_mesh_keeps_its_class_id_in_every_set_of_one_preset(tmp_path):
+    """Class ids come from the preset's meshes, not from those a set happened to draw: a train set and a
+    test set rendered apart must agree, or a detector's classes are swapped between them."""
+    import trimesh
+
+    from sasmi.data import RenderSet
+    from sasmi.dataset import RenderJob, render_set
+    from sasmi.preset import load_preset
+
+    for name, extents in (("cube_a", [0.8, 0.8, 0.8]), ("drum_b", [1.6, 0.6, 0.5])):
+        trimesh.creation.box(extents=extents).export(tmp_path / f"{name}.obj")
+    kinds = "".join(f'[[targets]]\nshape = "mesh"\nmesh = "{name}.obj"\nweight = 1\n' for name in ("cube_a", "drum_b"))
+    (tmp_path / "p.toml").write_text(f"targets_per_chip = 1\n[sonar]\nchip_size = 12.0\n{kinds}")
+    preset = load_preset(tmp_path / "p.toml")
+    drawn = [preset.sample(0, i).targets[0].mesh.endswith("drum_b.obj") for i in range(12)]
+    both = drawn.index(not drawn[0]) + 1  # chips 0 .. both - 1 hold both meshes; chip 0 alone one of them
+    one = render_set(RenderJob(preset=preset, out=tmp_path / "one", count=1, size=32, spp=2), progress=False)
+    two = render_set(RenderJob(preset=preset, out=tmp_path / "two", count=both, size=32, spp=2), progress=False)
+    assert RenderSet(one).categories == RenderSet(two).categories
+    assert RenderSet(one).categories[-2:] == ["cube_a", "drum_b"]

@@ -150,6 +150,18 @@ def test_cli_missing_mesh_exit_2(tmp_path, capsys):
     assert not (out / "images").exists()
 
 
+def test_mesh_kinds_are_found_beside_the_preset_from_any_folder(tmp_path, monkeypatch):
+    import trimesh
+
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box(extents=[1.0, 0.6, 0.5]).export(tmp_path / "meshes" / "drum.obj")
+    preset = write(tmp_path, 'targets_per_chip = 1\n[[targets]]\nshape = "mesh"\nmesh = "meshes/drum.obj"\n'
+                             '[[targets]]\nshape = "sphere"\n')
+    monkeypatch.chdir(tmp_path.parent)  # not the preset's folder: its relative mesh path must still resolve
+    meshes = {t.mesh for i in range(20) for t in load_preset(preset).sample(0, i).targets if t.shape == "mesh"}
+    assert meshes == {str(tmp_path / "meshes" / "drum.obj")}
+
+
 def test_target_kinds_are_drawn_by_weight():
     preset = Preset.from_dict({
         "targets_per_chip": {"choice": [1, 2]},
