@@ -22,6 +22,11 @@ from sasmi.scene_values import check_mesh_file
 SHAPES = ("cylinder", "sphere", "cone", "box", "torus", "boulder", "mesh")
 BACKSCATTER = ("lambert", "lambert2", "rough")
 ROLES = ("target", "companion")
+# the size fields each shape is made from (sasmi.render.geometry); a target's label keeps these alone, so
+# that a box does not carry the radius default as if it had one (ATR results are stratified by size)
+SIZE_FIELDS = {"cylinder": ("length", "radius"), "sphere": ("radius",), "cone": ("length", "radius", "radius_top"),
+               "box": ("length", "width", "height"), "torus": ("radius", "tube_radius"),
+               "boulder": ("length", "width", "height", "lumpiness"), "mesh": ("mesh", "scale")}
 
 
 def positive(v: float) -> bool:
@@ -195,5 +200,9 @@ def target_height(t: Target) -> float | None:
 
 
 def scene_to_dict(scene: Scene) -> dict:
-    return dataclasses.asdict(scene)
+    """Every field of the scene; of each target, only the size fields of its shape (SIZE_FIELDS)."""
+    record = dataclasses.asdict(scene)
+    unused = {shape: set().union(*SIZE_FIELDS.values()) - set(fields) for shape, fields in SIZE_FIELDS.items()}
+    record["targets"] = [{k: v for k, v in t.items() if k not in unused[t["shape"]]} for t in record["targets"]]
+    return record
 

@@ -14,7 +14,7 @@ from sasmi.render import crosscheck as xc
 from sasmi.render import povray
 from sasmi.render.geometry import _unit_shape, build_geometry
 from sasmi.render.mitsuba import Renderer, render
-from sasmi.scene import Post, Scene, Seafloor, Sonar, Target, target_height
+from sasmi.scene import SIZE_FIELDS, Post, Scene, Seafloor, Sonar, Target, target_height
 
 BOX = Target(shape="box", yaw=30.0, length=1.6, width=0.8, height=0.6)
 TORUS = Target(shape="torus", radius=0.5, tube_radius=0.15)
@@ -78,6 +78,8 @@ def test_new_shapes_render_with_masks_labels_and_burial(target):
     out = render(scene_with(target), size=size, spp=4)
     label = out.label.targets[0]
     assert label.category == target.shape and target.shape in BUILTIN_CATEGORIES
+    sizes = set().union(*SIZE_FIELDS.values())  # of the size fields, the label keeps its shape's alone
+    assert {k for k in label.params if k in sizes} == set(SIZE_FIELDS[target.shape])
     assert label.visible_pixels > 10 and label.shadow_pixels > 10
     c0, r0, c1, r1 = label.bbox
     col, row = label.pixel_centre
