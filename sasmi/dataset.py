@@ -242,6 +242,8 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     index) changes, as a transform that replaces the floor must. `identity` joins the run
     record, so a resumed run must use the same transform (e.g. the same generator checkpoint).
     """
+    if relabel is not None and transform is None:
+        raise ValueError("render_set: relabel goes with a transform (untransformed chips are written by the workers)")
     job = prepare(job, identity)
     claims = Claims(job.out / "claims")
     temps = _temp_files(job.out)
