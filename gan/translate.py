@@ -12,7 +12,7 @@ import shutil
 import warnings
 from dataclasses import replace
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import torch
@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, read_gray, write_gray, write_text
-from sasmi.labels import read_labels
+from sasmi.labels import ChipLabel, read_labels
 from sasmi.preprocess import resize, signed_to_unit, unit_to_signed
 
 MULTIPLE = 4  # the generator's two stride-2 stages
@@ -66,9 +66,9 @@ def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16,
     return out
 
 
-def carry_labels(in_dir: Path, out_dir: Path) -> None:
+def carry_labels(in_dir: Path, out_dir: Path, relabel: Callable[[ChipLabel], ChipLabel] | None = None) -> None:
     """Copy a render set's masks and labels to the set of its chips remade as PNGs in out_dir/images/:
-    the chips keep their geometry, so the labels still apply."""
+    the chips keep their geometry, so the labels still apply, but for what `relabel` changes."""
     for masks in ("masks", "instances", "shadows"):  # class, instance and shadow-instance masks
         if (in_dir / masks).is_dir():
             shutil.copytree(in_dir / masks, out_dir / masks, dirs_exist_ok=True)
@@ -76,6 +76,8 @@ def carry_labels(in_dir: Path, out_dir: Path) -> None:
         # the new chips are PNGs whatever the renders were (tiff16, npy): point the labels at them
         labels = [replace(label, image=str(Path(label.image).with_suffix(".png")) if label.image else label.image)
                   for label in read_labels(in_dir)]
+        if relabel is not None:
+            labels = [relabel(label) for label in labels]
         write_text(out_dir / "labels.jsonl", "".join(label.dumps() + "\n" for label in labels))
 
 

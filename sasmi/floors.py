@@ -27,8 +27,8 @@ from scipy import ndimage
 
 from sasmi.errors import SasmiError
 from sasmi.eval.config import PreservationConfig
-from sasmi.images import list_images, write_gray, write_text
-from sasmi.labels import ChipLabel, read_labels
+from sasmi.images import list_images, write_gray
+from sasmi.labels import ChipLabel
 from sasmi.stats import chip_statistics, floor_level
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor. far_near: the
@@ -204,9 +204,6 @@ def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targ
         if mask.shape != render.shape:
             raise SasmiError(f"{renders / 'masks' / path.stem}.png: mask {mask.shape} against image {render.shape}")
         write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor))
-    carry_labels(renders, out)
-    if (out / "labels.jsonl").is_file():
-        position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_for(..., i)
-        labels = [floor_label(label, choices, seed, position[Path(label.image).stem]) for label in read_labels(out)]
-        write_text(out / "labels.jsonl", "".join(label.dumps() + "\n" for label in labels))
+    position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_for(..., i)
+    carry_labels(renders, out, lambda label: floor_label(label, choices, seed, position[Path(label.image).stem]))
     return len(paths)

@@ -89,11 +89,13 @@ class Preset:
         scene = preset.sample(0, 0)  # cross-field checks on one draw, so a broken preset fails at load
         rng = np.random.default_rng(0)  # and on one draw of every kind, which one chip may not pick
         for where, t in kinds.items():
-            kind = sample_table(Target, t, rng, where)
-            if kind.shape == "mesh" and kind.mesh:  # as `sample` does: relative to the preset's folder
-                kind = dataclasses.replace(kind, mesh=str(preset.resolve_mesh(kind.mesh)))
+            kind = preset.with_mesh_resolved(sample_table(Target, t, rng, where))
             dataclasses.replace(scene, targets=(kind,)).validate(names=(where,))
         return preset
+
+    def with_mesh_resolved(self, t: Target) -> Target:
+        """A mesh target with its file found relative to the preset's folder; any other target as it is."""
+        return dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" and t.mesh else t
 
     def resolve_mesh(self, mesh: str) -> Path:
         p = Path(mesh).expanduser()
@@ -123,8 +125,7 @@ class Preset:
         if "companions" in self.raw:
             companions, kinds = self._companions(sonar, targets, np.random.default_rng([seed, index, 1]))
             targets, names = targets + companions, names + kinds
-        targets = [dataclasses.replace(t, mesh=str(self.resolve_mesh(t.mesh))) if t.shape == "mesh" and t.mesh else t
-                   for t in targets]
+        targets = [self.with_mesh_resolved(t) for t in targets]
         scene_seed = int(rng.integers(2**31 - 1))
         return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed
                      ).validate(names)

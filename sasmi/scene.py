@@ -27,6 +27,7 @@ ROLES = ("target", "companion")
 SIZE_FIELDS = {"cylinder": ("length", "radius"), "sphere": ("radius",), "cone": ("length", "radius", "radius_top"),
                "box": ("length", "width", "height"), "torus": ("radius", "tube_radius"),
                "boulder": ("length", "width", "height", "lumpiness"), "mesh": ("mesh", "scale")}
+_OTHER_SIZES = {shape: set().union(*SIZE_FIELDS.values()) - set(fields) for shape, fields in SIZE_FIELDS.items()}
 
 
 def positive(v: float) -> bool:
@@ -202,7 +203,6 @@ def target_height(t: Target) -> float | None:
 def scene_to_dict(scene: Scene) -> dict:
     """Every field of the scene; of each target, only the size fields of its shape (SIZE_FIELDS)."""
     record = dataclasses.asdict(scene)
-    unused = {shape: set().union(*SIZE_FIELDS.values()) - set(fields) for shape, fields in SIZE_FIELDS.items()}
-    record["targets"] = [{k: v for k, v in t.items() if k not in unused[t["shape"]]} for t in record["targets"]]
+    record["targets"] = [{k: v for k, v in t.items() if k not in _OTHER_SIZES[t["shape"]]} for t in record["targets"]]
     return record
 
