@@ -60,7 +60,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from sasmi.render import crosscheck, povray
-    from sasmi.preset import load_preset
+    from sasmi.scene.preset import load_preset
 
     base = load_preset(PRESET).sample(0, 0)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; {povray.version()}")

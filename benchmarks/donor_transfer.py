@@ -2,8 +2,8 @@
 
 `real_levels` gives each translated chip a random train chip's gray levels (ranks kept, the
 shadow's darkness kept: `Generator.at_donor_levels`). After 20 steps the SAS GAN is nearly the
-identity, and its translations score within 0.02 of the full runs' (README, *The φ-FID gain is
-the donor match's*), so the match applied to the renders themselves stands in for a short run.
+identity and its translations score close to the full runs' (docs/results.md), so the match
+applied to the renders themselves stands in for a short run.
 This writes that stand-in and variants of it, each an ordinary render set (images, masks,
 labels) for `sasmi evaluate` and `sasmi stats`:
 
@@ -13,7 +13,7 @@ labels) for `sasmi evaluate` and `sasmi stats`:
     two_band_levels two_band, then the donor's levels as in `levels`
     speckle_spread  the render's own smooth band, its speckle band scaled to the donor's spread,
                     then the donor's levels: real chips' speckle goes with their brightness
-                    (docs/realism.md, *What the renders miss*), the plain match keeps the render's
+                    (docs/matching.md, *What the renders miss*), the plain match keeps the render's
     truncated       the donor's levels pulled towards the donors' mean levels by --psi (the
                     truncation trick: fewer unusual chips)
 

@@ -1,5 +1,5 @@
 """Peak memory of the evaluation at scale: N real + N generated random φ vectors (D = 1024)
-and random images, through `sasmi.eval.run.evaluate` (FID ± bootstrap, matched ratio, KID,
+and random images, through `sasmi.eval.evaluate.evaluate` (FID ± bootstrap, matched ratio, KID,
 precision/recall, nearest neighbours in φ and pixels with their figures, t-SNE). Each N
 runs in a fresh process, so each peak RSS is its own.
 
@@ -7,7 +7,7 @@ runs in a fresh process, so each peak RSS is its own.
 
 Memory does not depend on --bootstrap (only time does). Images are held as the evaluation holds
 them, N × S² uint8 per set (read a block at a time: sasmi.eval.features.load_set).
-Targets (GitHub issue 15): < 2 GB at 6000 + 6000, < 4 GB at 20000 + 20000.
+Targets: < 2 GB at 6000 + 6000, < 4 GB at 20000 + 20000 (memory grows with N, not with N²).
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def one(n: int, bootstrap: int, image_size: int, dim: int) -> None:
 
     from sasmi.eval.config import EvalConfig
     from sasmi.eval.features import FeatureSet
-    from sasmi.eval.run import evaluate
+    from sasmi.eval.evaluate import evaluate
 
     rng = np.random.default_rng(0)
     real = FeatureSet("real", Path("real"), rng.integers(0, 256, (n, image_size, image_size), np.uint8),

@@ -2,14 +2,14 @@
 
     .venv/bin/python benchmarks/gan.py                       # CPU, and CUDA when present
     .venv/bin/python benchmarks/gan.py --nets small paper --train-size 128 --train-steps 20
-    .venv/bin/python benchmarks/gan.py --devices cuda --kinds sasgan --gan small_data --precision bf16 fp32
+    .venv/bin/python benchmarks/gan.py --devices cuda --kinds sasgan --recipe small_data --precision bf16 fp32
 
 Training steps/s come from the real training loop on a temporary folder of random
 images, timed as the difference between an N+2-step and a 2-step run, so start-up
 (reading data, TensorBoard) is excluded. Beside the wall-clock rate it prints the CPU
 seconds per step (all threads): on a machine that other jobs share, the wall clock
 measures the load, while CPU time at 1 thread (--threads 1) measures the work; one SAS GAN or DCGAN step is n_critic = 5
-critic updates and one generator update (`--gan small_data`: the recipe `sasmi fit` trains, 2 critic
+critic updates and one generator update (`--recipe small_data`: the recipe `sasmi fit` trains, 2 critic
 updates). On CUDA each training is timed under bf16 autocast and in float32 (`--precision`;
 a CPU always trains in float32). The paper net at 256² on a CPU takes
 minutes; it runs on CUDA by default and on the CPU only when asked for.
@@ -27,7 +27,7 @@ from pathlib import Path
 # run as a script, this file's folder comes first on sys.path and its name would shadow the gan package
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
-# as the sasmi commands do (sasmi/commands/common.py): idle OpenMP threads sleep, not spin;
+# as the sasmi commands do (sasmi/cli/common.py): idle OpenMP threads sleep, not spin;
 # OMP_WAIT_POLICY=ACTIVE in the environment measures the spinning default
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -43,7 +43,7 @@ from sasmi.gan.kinds.sasgan import SASGAN  # noqa: E402
 from sasmi.gan.loop import train  # noqa: E402
 from sasmi.images import write_gray  # noqa: E402
 from sasmi.masks import write_class_mask  # noqa: E402
-from sasmi.pipeline import sasgan_settings  # noqa: E402
+from sasmi.gan.recipes import load_recipe  # noqa: E402
 
 
 def sync(device: torch.device) -> None:
@@ -99,7 +99,7 @@ def main() -> None:
     parser.add_argument("--kinds", nargs="+", choices=("autoencoder", "sasgan", "dcgan"),
                         default=["autoencoder", "sasgan", "dcgan"], help="run kinds to time (default all)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default torch's choice)")
-    parser.add_argument("--gan", metavar="RECIPE", help="SAS GAN settings of a recipe (as `sasmi fit --gan`; "
+    parser.add_argument("--recipe", metavar="NAME|FILE", help="SAS GAN settings of a recipe (as `sasmi fit --recipe`; "
                                                         "default: the SasganRun defaults)")
     parser.add_argument("--precision", nargs="+", choices=("bf16", "fp32"), default=["bf16", "fp32"],
                         help="CUDA training precisions to time (default both; a CPU trains in float32)")
@@ -108,7 +108,7 @@ def main() -> None:
     if args.threads:
         torch.set_num_threads(args.threads)
     devices = args.devices or ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
-    settings = sasgan_settings(args.gan) if args.gan else {}
+    settings = load_recipe(args.recipe) if args.recipe else {}
 
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp)

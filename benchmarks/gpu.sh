@@ -1,17 +1,17 @@
 #!/usr/bin/env bash
-# One lent GPU machine, one call: SAS GAN speed under bf16 and float32, then `sasmi fit` on the GPU
+# On one GPU machine, one command: SAS GAN speed under bf16 and float32, then `sasmi fit` on the GPU
 # for MINUTES at each seed side by side (one small GAN leaves most of the GPU idle), and each
 # run's realism report on the validation chips.
 #
 #   benchmarks/gpu.sh DATA MINUTES RECIPE      (SEEDS="0 1 2" by default; SPEED=0: the fits alone)
 #
-# The device machine has PyTorch but no Mitsuba and no package index, so everything comes with the
-# call (the device tool's `carry`): .whl/ holds the sasmi wheel (`pip wheel --no-deps -w .whl .`),
-# DATA holds what was made on this machine: train/ and validation/ (real target chips, files not
+# The GPU machine needs PyTorch but neither Mitsuba nor a package index: everything else comes with
+# the checkout: .whl/ holds the sasmi wheel (`pip wheel --no-deps -w .whl .`),
+# DATA holds what was made on a machine with Mitsuba: train/ and validation/ (real target chips, files not
 # links) and, per seed S, seedS/phi (an autoencoder run) and seedS/renders (the fit's render set of
 # that seed). The renders stage is marked done in each fresh fit run, so the fit starts with the GAN.
-# Results land in $OUT: speed.txt, and per seed fitS.log and metricsS.json (the device tool
-# brings back 8 files); each run's fit.json (seconds per stage) is printed.
+# Results land in $OUT (default /tmp/gpu_out): speed.txt, and per seed fitS.log and metricsS.json;
+# each run's fit.json (seconds per stage) is printed.
 set -u
 repo=$(pwd)
 data=$(realpath "${1:?DATA}")
@@ -31,23 +31,23 @@ python3 -c "import torch, sasmi; print('torch', torch.__version__, torch.cuda.is
 
 echo "== speed: bf16 and float32, the recipe's SAS GAN at 128², and generator inference at 256²"
 [ "${SPEED:-1}" = 0 ] || timeout 150 python3 "$repo/benchmarks/gan.py" --devices $device --nets small --kinds sasgan \
-    --gan "$recipe" --train-steps ${STEPS:-100} 2>&1 | grep -v Warning | tee "$out/speed.txt"
+    --recipe "$recipe" --train-steps ${STEPS:-100} 2>&1 | grep -v Warning | tee "$out/speed.txt"
 
-echo "== sasmi fit on the GPU, $minutes minutes, --gan $recipe, seeds $seeds side by side ($threads CPU threads each)"
+echo "== sasmi fit on the GPU, $minutes minutes, --recipe $recipe, seeds $seeds side by side ($threads CPU threads each)"
 for seed in $seeds; do
-    run=/tmp/fit$seed  # on a machine still warm from a call before, the fit resumes there with the larger budget
+    run=/tmp/fit$seed  # a run folder already there (the script run again) resumes with the larger budget
     [ -f $run/fit.json ] || python3 - "$data" "$run" "$minutes" "$recipe" "$seed" <<'EOF'
 import shutil, sys
-from sasmi.pipeline import FitPlan, State, with_defaults
+from sasmi.realism.fit import FitPlan, State, with_defaults
 data, run, minutes, recipe, seed = sys.argv[1:]
 plan = with_defaults(FitPlan(real=f"{data}/train", out=run, phi_real=f"{data}/train", validation=f"{data}/validation",
-                             minutes=float(minutes), seed=int(seed), gan=recipe, phi=f"{data}/seed{seed}/phi"))
+                             minutes=float(minutes), seed=int(seed), recipe=recipe, phi=f"{data}/seed{seed}/phi"))
 state = State(plan)  # a fresh run folder whose renders stage is the renders made with Mitsuba elsewhere
 shutil.copytree(f"{data}/seed{seed}/renders", f"{run}/renders")
 state.add("renders", 0.0, done=True)
 EOF
     /tmp/site/bin/sasmi fit --real "$data/train" --phi-real "$data/train" --validation "$data/validation" \
-        --out $run --phi "$data/seed$seed/phi" --gan "$recipe" --minutes "$minutes" --seed $seed \
+        --out $run --phi "$data/seed$seed/phi" --recipe "$recipe" --minutes "$minutes" --seed $seed \
         --device $device --threads $threads 2>&1 | tr '\r' '\n' | grep -v "it/s\|img/s" > "$out/fit$seed.log" &
 done
 wait
@@ -59,7 +59,7 @@ done
 python3 - "$out" $seeds <<'EOF'
 import json, sys
 out, seeds = sys.argv[1], sys.argv[2:]
-for seed in seeds:  # the realism goals of issue 12, one row per set
+for seed in seeds:  # the realism report's headline metrics, one row per set
     m = json.load(open(f"{out}/metrics{seed}.json"))
     for key, r in m["realism"].items():
         t = m["target_preservation"].get(key, {})

@@ -36,9 +36,9 @@ def main() -> None:
 
     import torch
 
-    from sasmi.fit import central_difference
+    from sasmi.realism.fit_scene import central_difference
     from sasmi.render.differentiable import PARAMETERS, DifferentiableRenderer, scene_parameters
-    from sasmi.preset import Preset
+    from sasmi.scene.preset import Preset
 
     renderer = DifferentiableRenderer(args.size, args.spp)
     for scene_name, raw in SCENES.items():

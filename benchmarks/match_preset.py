@@ -3,10 +3,10 @@
 Renders PRESET at --size (default 128) into --out (resumes: an existing set with the same
 job is reused), computes the mask-free image statistics of the real folder and of the
 renders, and prints the side-by-side table with ok/FAIL per statistic (the tolerances of
-docs/realism.md) and a summary line `pass=K/N`. Exit status 0 when every statistic passes.
+docs/matching.md) and a summary line `pass=K/N`. Exit status 0 when every statistic passes.
 
     .venv/bin/python benchmarks/match_preset.py scenes/cylinder_chip.toml --real SPLIT/train/targets \
-        --count 150 --out /tmp/match/cylinder [--also scenes/muscle_paper.toml=/tmp/match/muscle]
+        --count 150 --out runs/match/cylinder [--also scenes/muscle_paper.toml=runs/match/muscle]
 
 Tune on train chips only and report on validation chips (`sasmi split`), so that the match
 is not a fit to the chips it is judged on.
@@ -25,9 +25,9 @@ def render(preset: Path, out: Path, count: int, size: int, spp: int, seed: int) 
     """Render (or resume) the set; prints the wall time per chip rendered by this call."""
     import time
 
-    from sasmi.dataset import RenderJob, render_set
+    from sasmi.renderset.write import RenderJob, render_set
     from sasmi.images import list_images
-    from sasmi.preset import load_preset
+    from sasmi.scene.preset import load_preset
 
     before = len(list_images(out)) if out.is_dir() else 0
     start = time.perf_counter()
@@ -77,8 +77,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--columns", type=int, default=8, help="chips per row of --figure")
     args = p.parse_args(argv)
 
-    from sasmi.stats import chip_statistics
-    from sasmi.stats_report import TOLERANCES, check, plot, table
+    from sasmi.chips.stats import chip_statistics
+    from sasmi.chips.compare import TOLERANCES, check, plot, table
 
     jobs = [(args.preset, args.out)] + [tuple(Path(x) for x in spec.split("=", 1)) for spec in args.also]
     results = [chip_statistics(args.real, args.size)]

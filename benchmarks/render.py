@@ -24,7 +24,7 @@ PRESET = REPO / "scenes" / "cylinder_chip.toml"
 
 RSS_CHILD = """
 import resource, sys
-from sasmi.cli import main
+from sasmi.cli.main import main
 code = main(sys.argv[1:])
 print("PEAK_RSS_KB", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 sys.exit(code)
@@ -33,9 +33,9 @@ sys.exit(code)
 
 def per_image_ms(images: int, warmup: int, size: int, spp: int) -> tuple[list[float], list[float]]:
     """Wall and CPU (all threads) milliseconds per image; CPU time is steadier on a shared machine."""
-    from sasmi.dataset import write_one
+    from sasmi.renderset.write import write_one
     from sasmi.render.mitsuba import Renderer
-    from sasmi.preset import load_preset
+    from sasmi.scene.preset import load_preset
 
     preset = load_preset(PRESET)
     renderer = Renderer(size=size, spp=spp)
@@ -113,7 +113,7 @@ def main() -> None:
           f"mean {statistics.mean(times):.0f}; {len(times)} images); "
           f"CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
     if not args.no_povray:
-        from sasmi.preset import load_preset
+        from sasmi.scene.preset import load_preset
 
         wall, pov_cpu = povray_ms(load_preset(PRESET).sample(0, 0), args.size)
         print(f"POV-Ray on the first of those scenes ({args.size}x{args.size}, 32 emitters, 3x3 jittered + centre ray, "

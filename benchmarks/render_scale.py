@@ -26,7 +26,7 @@ PRESET = REPO / "scenes" / "cylinder_chip.toml"  # 32 emitters
 def run(workers: int, count: int, size: int, spp: int) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "set"
-        command = [sys.executable, "-m", "sasmi.cli", "render", str(PRESET), "--out", str(out), "--count",
+        command = [sys.executable, "-m", "sasmi.cli.main", "render", str(PRESET), "--out", str(out), "--count",
                    str(count), "--size", str(size), "--spp", str(spp), "--workers", str(workers)]
         start = time.perf_counter()
         subprocess.run(command, check=True, capture_output=True, env={**os.environ, "PYTHONPATH": str(REPO)})

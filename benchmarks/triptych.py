@@ -1,8 +1,10 @@
 """Render | translation | nearest real chip (in φ) for a dozen chips: the README's GAN figures.
 
     .venv/bin/python benchmarks/triptych.py --renders RUN/renders --translated RUN/translated \
-        --real runs/split/validation/targets --phi RUN/phi --out docs/figures/sasgan_triptych.png [--count 12] \
+        --real SPLIT/validation/targets --phi RUN/phi --out docs/figures/sasgan_triptych.png [--count 12] \
         [--on-floors RUN/on_floors]
+
+RUN is a `sasmi fit` run folder, SPLIT the folder `sasmi split` wrote.
 
 With --on-floors (a `sasmi fit` run with real floors) a row between render and translation shows
 the render on its real floor, the GAN's input.

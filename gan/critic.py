@@ -27,8 +27,8 @@ class CriticConfig:
     # critic's ~100 target chips train small heads on top of it, not a whole net (SAS GAN only)
     phi_features: bool = False
     # judge each chip standardised (its pixels' mean 0, standard deviation 1): its overall level and
-    # contrast are left to the gray-level term. Learning from ~100 chips, the critic pulled the
-    # levels away from real while the term pulled them back, through the same curve (docs/gan.md)
+    # contrast are left to the gray-level term. Learning from ~100 chips, the critic pulls the
+    # levels away from real while the term pulls them back, through the same curve (docs/gan.md)
     standardise: bool = False
 
 

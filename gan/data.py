@@ -23,7 +23,7 @@ from sasmi.gan.run import fingerprint
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, read_gray
 from sasmi.masks import read_mask
-from sasmi.shards import has_shards, read_shards, shard_files
+from sasmi.renderset.shards import has_shards, read_shards, shard_files
 from sasmi.preprocess import centre_crop, check_size, resize_short_side, unit_to_signed
 
 

@@ -7,7 +7,7 @@ DistributedDataParallel, which averages their gradients over the processes.
 --batch stays the global batch. Every process draws the global batch's random numbers
 (data order, crops, flips, augmentation, GP interpolation, latent codes) from the same
 seeded streams and keeps its own slice, so N processes train the same network as one
-process at the same batch, up to the order of floating-point sums (tests/test_distributed.py),
+process at the same batch, up to the order of floating-point sums (tests/gan/test_distributed.py),
 and a run resumes on any number of processes. Rank 0 alone writes the run folder.
 """
 from __future__ import annotations
@@ -63,8 +63,8 @@ def stop() -> None:
     global _world
     if dist.is_initialized():
         # A DDP wrapper left in a reference cycle would hold the gloo group until interpreter
-        # exit, where its threads die in a C++ destructor ("terminate called without an active
-        # exception", about 1 run in 15 on 2 cores)
+        # exit, where its threads can die in a C++ destructor ("terminate called without an
+        # active exception")
         gc.collect()
         dist.destroy_process_group()
     _world = World()

@@ -5,7 +5,7 @@
 critic learns to see), 7×7 conv, tanh. Instance norm, as in CycleGAN's version of the
 same net: batches of 4 are too small for batch statistics. It is written as GroupNorm with
 one group per channel: the same maths and the same weights (`weight`, `bias` per
-channel), 2-4× faster than InstanceNorm2d on a CPU (docs/gan.md, Speed). Reflection padding keeps the
+channel), and faster than InstanceNorm2d on a CPU. Reflection padding keeps the
 borders free of a dark frame. Fully convolutional: any size that is a multiple of 4.
 """
 from __future__ import annotations
@@ -40,23 +40,23 @@ class GeneratorConfig:
     tone_curve: bool = False
     # with `tone_curve`: the curve also reads a random code drawn per chip, so one render can take any
     # of many gray-level distributions, as a random real chip's histogram given to each render does
-    # (docs/gan.md, *What tells the renders from real chips*); without it the levels are a function
+    # (docs/gan.md, *Recipes*); without it the levels are a function
     # of the render's. The gray-level term, an energy distance between sets, rewards the real spread
     tone_style: bool = False
     # the finished chip takes the gray-level distribution of a real chip the GAN learned from, drawn
     # per chip by its code (histogram matching: each pixel keeps its rank). The net then only chooses
     # where things are bright or dark, and the critic, seeing real levels on both sides, judges that
-    # arrangement. Random real histograms alone take renders 1.53 → 1.36 in φ-FID (docs/gan.md)
+    # arrangement. Random real histograms alone bring renders nearer real chips in φ (docs/results.md)
     donor_levels: bool = False
     # the same match in translation only: the GAN trains as without it (its critic never sees the
-    # donors' levels), and each chip it translates then takes one. Measured better than learning it
-    # (docs/gan.md, *Donor levels*)
+    # donors' levels), and each chip it translates then takes one: this beats learning the match
+    # (docs/gan.md, *Tried and dropped*)
     donor_levels_after: bool = False
     # with either donor option: pixels darker than this fraction of the chip's median (smoothed over
     # 1 px: a lone dark speckle takes the donor's level) keep their own ratio to the median where
     # that is darker than the donor's level. A donor's darkest levels are its own shadow's, often
-    # smaller or paler than the render's: matched alone they paled the shadows (docs/gan.md,
-    # *Keeping the shadows*); 0: off
+    # smaller or paler than the render's: matched alone they pale the shadows (docs/gan.md,
+    # *Why each part*); 0: off
     donor_shadow: float = 0.0
 
     @property
@@ -66,7 +66,7 @@ class GeneratorConfig:
 
 
 # `small` trains on a CPU at 128²; `paper` is the standard 256² Johnson/CycleGAN size
-# (64 wide, 9 blocks); Reed et al.'s exact widths were not available to us.
+# (64 wide, 9 blocks); Reed et al.'s exact widths are not known.
 RENDER_REACH = 0.98
 GENERATOR_NETS = {"small": GeneratorConfig(16, 4), "paper": GeneratorConfig(64, 9)}
 
@@ -176,7 +176,7 @@ def keep_shadows(own: torch.Tensor, matched: torch.Tensor, fraction: float) -> t
 class _RanksOnly(torch.autograd.Function):
     """Forward: the chip at a donor's levels. Backward: straight through to the chip at its own
     levels, less what would change its mean or its contrast: those the donor's levels replace, and
-    passed on they added up, step after step, until the net's own levels sat at ±1 (ties: one flat
+    passed on they add up, step after step, until the net's own levels sit at ±1 (ties: one flat
     gray chip after the matching). What is left moves pixels' ranks: which are bright, which dark."""
 
     @staticmethod
@@ -221,7 +221,7 @@ class Generator(nn.Module):
         donors = cfg.takes_donors
         # (N, len(DONOR_PROBS)): each real chip's levels; filled by `set_donors` when training starts,
         # then kept in the checkpoint with the weights, so translation draws from the same chips
-        # (not in the checkpoints of runs without donors, which then load as before)
+        # (persistent only with donors: a run without them keeps no `donors` entry in its checkpoints)
         self.register_buffer("donors", torch.empty(0, len(DONOR_PROBS)), persistent=donors)
         # entries of `code`: the tone style's, then the donor's; 0: takes none
         self.style_size = (self.tone.style if self.tone is not None else 0) + int(donors)
@@ -261,8 +261,8 @@ class Generator(nn.Module):
             image = torch.tanh(torch.atanh(toned.clamp(-RENDER_REACH, RENDER_REACH)) + correction)
             # the image's values, with the gradient of the curve's output (the correction held as a
             # constant offset, one for one), for the gray-level term: asked of the whole generator,
-            # the correction painted bright bands beside the shadows; asked of the curve's output
-            # alone, the levels that the correction then moved stayed off. Not through the tanh:
+            # the correction paints bright bands beside the shadows; asked of the curve's output
+            # alone, it misses the levels that the correction then moves. Not through the tanh:
             # where the curve reaches ±0.98 its clamp has none
             curve_only = toned + (image - toned).detach()
         own_levels = image

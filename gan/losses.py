@@ -181,11 +181,11 @@ def shadow_shape_loss(fake: torch.Tensor, render: torch.Tensor, masks: torch.Ten
     |beside(fake) − beside(render)| + |pale(fake) − pale(render)| (`shadow_outline`).
 
     fake, render: (B, 1, S, S) in [-1, 1]. The contrast term keeps a shadow darker than the floor
-    around it, and is met as well when that floor darkens too: the shadow widens (`runs/fit66`,
-    docs/gan.md). Two terms, not one on a soft IoU: asked for the render's IoU, where darker
-    inside buys wider outside, the generator made shadows darker than real ones (`runs/fit68`).
-    Two-sided, not hinges: a hinge on a noisy per-chip figure is met with a margin, and the
-    generator learnt shadows darker than the render's with a bright rim beside them (`runs/fit70`).
+    around it, and is met as well when that floor darkens too: the shadow widens (docs/gan.md,
+    *Why each part*). Two terms, not one on a soft IoU: asked for the render's IoU, where darker
+    inside buys wider outside, the generator makes shadows darker than real ones. Two-sided, not
+    hinges: a hinge on a noisy per-chip figure is met with a margin, and the generator learns
+    shadows darker than the render's with a bright rim beside them.
     """
     with torch.no_grad():
         allowed = torch.stack(shadow_outline(render, masks, ring))  # (2, B)

@@ -19,7 +19,7 @@ import hashlib
 import json
 import math
 import os
-from dataclasses import MISSING, asdict, dataclass, fields, is_dataclass
+from dataclasses import MISSING, asdict, dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -28,10 +28,9 @@ from tqdm import tqdm
 
 from sasmi.errors import SasmiError
 from sasmi.images import atomic_path, write_gray, write_text
-from sasmi.limits import Range
-from sasmi.preprocess import check_size, signed_to_unit
+from sasmi.limits import TRAIN_MAX_SIZE, setting_range
+from sasmi.preprocess import signed_to_unit
 
-MAX_SIZE = 1024  # every image of a set is held in memory at S²: 1000 images at 1024² are 4 GB
 
 
 def provenance() -> dict:
@@ -49,12 +48,17 @@ def provenance() -> dict:
     return {"sasmi": __version__, "torch": torch.__version__, "git_commit": commit, "command": sys.argv}
 
 
-def check_number(flag: str, value, low: float, high: float, integer: bool = False, why: str = "") -> None:
-    """A SasmiError naming `flag` unless `value` is a finite number in [low, high] (sasmi.limits' wording)."""
+def check_number(name: str, value, high: float | None = None) -> None:
+    """A SasmiError naming `name` unless `value` is a finite number in its range in sasmi.limits
+    (`high`: a tighter upper bound that depends on other settings)."""
+    allowed = setting_range(name)
+    if high is not None:
+        allowed = replace(allowed, hi=min(high, allowed.hi))
+    integer = allowed.kind is int
     is_number = isinstance(value, (int, float)) and not isinstance(value, bool)
     if not is_number or integer and math.isfinite(value) and not float(value).is_integer():
-        raise SasmiError(f"{flag}: {value!r} is not {'an integer' if integer else 'a number'}")
-    Range(low, high, why, int if integer else float).check(value, flag)
+        raise SasmiError(f"{name}: {value!r} is not {'an integer' if integer else 'a number'}")
+    allowed.check(value, name)
 
 
 @dataclass(frozen=True)
@@ -70,25 +74,25 @@ class RunConfig:
     sample_every: int = 250  # steps between sample grids
     checkpoint_every: int = 250  # steps between last.pt writes; also best.pt's interval
     best_from: int = 0  # best.pt is only chosen at or after this step
-    # bf16 autocast on CUDA (a CPU always trains in float32): off, since at batch 4 an H200 trained
-    # slower with it than in float32, 11.8 against 14.1 steps/s (docs/gan.md, *Speed*)
+    # bf16 autocast on CUDA (a CPU always trains in float32): off, since at batch 4 it is slower
+    # than float32 on an H200 and an H100 (docs/gan.md, *GPU and CPU notes*)
     amp: bool = False
 
     def validate(self) -> "RunConfig":
         """Self, or a SasmiError naming the flag and the allowed range."""
-        check_number("--steps", self.steps, 1, 10 ** 7, integer=True, why="10 million is weeks on a GPU")
-        check_size(self.size)
-        check_number("--size", self.size, 16, MAX_SIZE, integer=True, why="images are held in memory at S²")
-        check_number("--batch", self.batch, 1, 1024, integer=True)
-        check_number("--seed", self.seed, 0, 2 ** 63 - 1, integer=True)
-        check_number("--lr", self.lr, 1e-8, 1.0)
+        check_number("--steps", self.steps)
+        check_number("--size", self.size, high=TRAIN_MAX_SIZE)
+        check_number("--batch", self.batch)
+        check_number("--seed", self.seed)
+        check_number("--lr", self.lr)
         if not (isinstance(self.betas, tuple) and len(self.betas) == 2):
             raise SasmiError(f"--betas {self.betas}: expected two numbers")
         for beta in self.betas:
-            check_number("--betas", beta, 0.0, 0.9999, why="Adam's averaging factors, below 1")
-        for flag in ("log_every", "sample_every", "checkpoint_every"):
-            check_number(f"--{flag.replace('_', '-')}", getattr(self, flag), 1, 10 ** 7, integer=True)
-        check_number("--best-from", self.best_from, 0, 10 ** 7, integer=True)
+            check_number("--betas", beta)
+        check_number("--checkpoint-every", self.checkpoint_every)
+        for flag in ("log_every", "sample_every"):
+            check_number(flag, getattr(self, flag))
+        check_number("best_from", self.best_from)
         return self
 
 
@@ -173,7 +177,7 @@ def read_checkpoint(path: Path, kind: str) -> Saved:
         raise SasmiError(f"{path}: not a readable checkpoint ({why})") from None
     if not isinstance(ckpt, dict) or not isinstance(ckpt.get("state"), dict) or "step" not in ckpt:
         raise SasmiError(f"{path}: not a sasmi training checkpoint")
-    if "config" not in ckpt:  # checkpoints written before the config moved inside them
+    if "config" not in ckpt:  # a checkpoint that carries no config: the run's config.json has it
         try:
             saved = json.loads((path.parent.parent / "config.json").read_text())
             ckpt["kind"], ckpt["config"] = saved["kind"], saved["config"]

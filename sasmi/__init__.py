@@ -6,8 +6,8 @@
 """
 __version__ = "0.1.0"
 
-from sasmi.preset import load_preset  # noqa: E402  (no renderer import: cheap)
-from sasmi.scene import Scene  # noqa: E402
+from sasmi.scene.preset import load_preset  # noqa: E402  (no renderer import: cheap)
+from sasmi.scene.model import Scene  # noqa: E402
 # The package sasmi.render is callable: render(scene, size, spp). It imports Mitsuba on first use.
 from sasmi import render  # noqa: E402
 

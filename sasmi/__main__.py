@@ -1,6 +1,6 @@
 """`python -m sasmi ...` runs the `sasmi` command."""
 import sys
 
-from sasmi.cli import main
+from sasmi.cli.main import main
 
 sys.exit(main())

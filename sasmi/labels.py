@@ -1,8 +1,7 @@
 """Typed label records of a render set: one writer (`ChipLabel.to_json`), one reader (`read_labels`).
 
-On disk (unchanged since the first render sets): `labels/NNNNNN.json`, one per chip and
-written last (it marks the chip complete), and `labels.jsonl`, all of them in index
-order. A record holds the sampled scene (`sonar`, `seafloor`, `post`, `seed`: the
+On disk: `labels/NNNNNN.json`, one per chip and written last (it marks the chip
+complete), and `labels.jsonl`, all of them in index order. A record holds the sampled scene (`sonar`, `seafloor`, `post`, `seed`: the
 scene's own seed) and per target its sampled parameters plus what the render measured.
 Pixel coordinates are (col, row) = (x, y) of the image, boxes (col0, row0, col1, row1)
 with the end exclusive.
@@ -58,7 +57,7 @@ class TargetLabel:
 
     @property
     def role(self) -> str:
-        """"target", or "companion": another object in view (sasmi.scene.Target.role; labels before it: target)."""
+        """"target", or "companion": another object in view (sasmi.scene.model.Target.role; a record without it: target)."""
         return str(self.params.get("role", "target"))
 
     @property
@@ -105,7 +104,7 @@ class ChipLabel:
     mask: str = ""  # path of the class mask, relative to the render set
     extra: dict = field(default_factory=dict)  # keys this version does not know, kept on rewrite
     # labelled clutter (rocks): kind, pixel_centre (col, row), radius (px), bbox (col0, row0, col1, row1),
-    # x, y, radius_m (m); written only when there is some, so older records read unchanged
+    # x, y, radius_m (m); written only when there is some, so a record without it reads as no clutter
     clutter: tuple[dict, ...] = ()
 
     def to_json(self) -> dict:

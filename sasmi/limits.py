@@ -1,15 +1,16 @@
 """The stated ranges of every number a user can give, each with the reason for its bound.
 
-One table for command-line flags (FLAGS, keyed by the flag's name, which has one meaning
-in every command) and one for preset fields (FIELDS, keyed by "section.field"); the
-argparse types in sasmi/cli_types.py and the preset checks in sasmi/scene_values.py read them.
-Lower bounds that are part of a preset field's meaning (> 0, in [0, 1]) stay beside the
-field in scene.py (preset.py for target kinds and companions); this module adds the finite upper
-bounds and why they are where they are.
+The one source of every range: FLAGS, keyed by a flag's name (one meaning in every command),
+is read by the argparse types (sasmi/cli/arguments.py) and by the run configs that the flags
+fill (gan/run.py's check_number), so a flag and the config it sets cannot disagree; SETTINGS
+holds the recipe keys that have no flag; FIELDS, keyed by "section.field", the preset fields
+(sasmi/scene/values.py). Lower bounds that are part of a preset field's meaning (> 0, in
+[0, 1]) stay beside the field in sasmi/scene/model.py; this module adds the finite upper bounds
+and why they are where they are.
 
-Measured on the 2-core dev machine (scenes/cylinder_chip.toml; probe in docs/errors.md):
-a render costs ~0.5 kB of memory per pixel (1024 px: +0.5 GB for seafloor mesh, BVH and
-film), whatever the spp, and ~5e6 samples (pixels x spp) per second.
+A render costs ~0.5 kB of memory per pixel (1024 px: +0.5 GB for seafloor mesh, BVH and film),
+whatever the spp, and takes ~5e6 samples (pixels x spp) per second on a 2-core AMD EPYC (AVX-512)
+(docs/errors.md).
 """
 from __future__ import annotations
 
@@ -77,8 +78,9 @@ MAX_TARGETS = 1024  # targets in one scene: each is a ~130-triangle mesh built p
 # ---------------------------------------------------------------- command-line flags
 
 MAX_SIZE = 4096
+TRAIN_MAX_SIZE = 1024  # every image of a training set is held in memory at S²: 1000 images at 1024² are 4 GB
 MAX_SAMPLES = 1 << 30  # size² x spp of one chip: ~4 min at ~5e6 samples/s; more is a typo, not a plan
-SIZE_WHY = ("networks halve the image four times; a render costs ~0.5 kB per pixel "
+SIZE_WHY = ("the critic, the autoencoder and the U-Net halve the image four times; a render costs ~0.5 kB per pixel "
             f"(~8 GB at {MAX_SIZE})")
 
 FLAGS: dict[str, Range] = {
@@ -91,19 +93,55 @@ FLAGS: dict[str, Range] = {
     "--spp": Range(1, 4096, "render time grows linearly with samples per pixel", int),
     "--workers": Range(1, 64, "each worker process holds its own Dr.Jit kernel and scene; "
                               "more processes than cores only wait", int),
+    "--per-shard": Range(1, 100_000, "samples per tar shard; a shard is rendered whole before it is written", int),
+    "--minutes": Range(0.01, 7 * 24 * 60, "a fraction of a minute is a smoke test in which every stage still runs; "
+                                          "a week is the most any plan needs"),
     "--batch": Range(1, 1024, "one pass holds batch x size² activations per layer", int),
     "--steps": Range(1, 10_000_000, "training and fitting steps; 10^7 is weeks of GPU time", int),
-    "--lr": Range(1e-12, 1.0, "Adam learning rates above 1 diverge at once; 0 learns nothing"),
-    "--betas": Range(0.0, 0.999999, "Adam's moment decays lie in [0, 1)"),
+    "--lr": Range(1e-8, 1.0, "Adam learning rates above 1 diverge at once; below 1e-8 float32 weights do not move"),
+    "--critic-lr": Range(1e-8, 1.0, "as --lr"),
+    "--betas": Range(0.0, 0.9999, "Adam's moment decays lie in [0, 1); nearer 1 they average over more steps "
+                                  "than a run has"),
     "--checkpoint-every": Range(1, 10_000_000, "steps between checkpoints; a kill loses at most this many", int),
     "--n-critic": Range(1, 100, "critic updates per generator update; WGAN-GP uses 5", int),
+    "--gp-weight": Range(0.0, 1e4, "λ of the gradient penalty; WGAN-GP uses 10"),
+    "--r1-gamma": Range(0.0, 1e4, "γ of R1; StyleGAN2 uses 0.01-100"),
     "--phi-weight": Range(0.0, 1e6, "weight of the φ loss; the default is 100"),
-    "--phi-margin": Range(0.0, 10.0, "free relative φ change; 10 means φ is not constrained at all"),
+    "--phi-margin": Range(0.0, 10.0, "free relative φ change, a fraction of ‖φ(render)‖; 10 means φ is not "
+                                     "constrained at all"),
+    "--ema": Range(0.0, 0.99999, "decay of the generator's moving average; 0 turns it off"),
+    "--mask-weight": Range(0.0, 1e6, "weight of the mask contrast term; 0 turns it off"),
+    "--mask-keep": Range(0.0, 2.0, "a fraction of the render's own contrast"),
+    "--seeds": Range(1, 100, "each seed is one more training per regime", int),
     "--bootstrap": Range(2, 100_000, "a ± needs 2 resamples; each resample recomputes one FID", int),
     "--scenes": Range(1, 256, "scenes rendered per fit step; time grows linearly", int),
     "--columns": Range(1, 256, "tiles per row of a contact sheet", int),
     "--limit": Range(1, 10_000, "tiles in one contact sheet, all held in memory", int),
 }
+
+# recipe keys with no flag of their own (gan/recipes/*.toml), checked by the run configs as the flags are
+SETTINGS: dict[str, Range] = {
+    "final_samples": Range(0, 100_000, "images the DCGAN writes when it ends", int),
+    "mask_ring": Range(1, MAX_SIZE // 2, "pixels of floor around a shadow or target; below half the chip", int),
+    "best_from": Range(0, 10_000_000, "best.pt is chosen at or after this step", int),
+    "sample_every": Range(1, 10_000_000, "steps between sample grids", int),
+    "log_every": Range(1, 10_000_000, "steps between TensorBoard scalars", int),
+    "mask_rise": Range(0.0, 2.0, "signed units: the whole range is 2"),
+    "shadow_weight": Range(0.0, 1e6, "weight of the shadow shape term; 0 turns it off"),
+    "levels_weight": Range(0.0, 1e6, "weight of the gray-level term; 0 turns it off"),
+    "augment.translation": Range(0.0, 0.5, "a fraction of the chip; beyond half the target leaves it"),
+    "augment.cutout": Range(0.0, 1.0, "a fraction of the chip"),
+    "augment.brightness": Range(0.0, 1.0, "in the signed range"),
+    "augment.contrast": Range(0.0, 1.0, "a fraction of the contrast"),
+    "generator.correction_scale": Range(1, 16, "px over which the correction is smooth; the small net's "
+                                               "coarsest map is 16 px", int),
+    "generator.donor_shadow": Range(0.0, 1.0, "a fraction of the median gray level"),
+}
+
+
+def setting_range(name: str) -> Range:
+    """The range of a flag ("--lr") or a recipe key without one ("augment.cutout")."""
+    return FLAGS[name] if name in FLAGS else SETTINGS[name]
 
 
 def check_render_cost(size: int, spp: int, flags: str = "--size and --spp") -> None:

@@ -15,20 +15,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sasmi.errors import SasmiError
+from sasmi.limits import FLAGS
 
 if TYPE_CHECKING:  # torch is imported where a tensor is made: `sasmi render` needs none (and 180 MB less)
     import torch
 from sasmi.images import read_gray
 
-SIZE_MULTIPLE = 16  # four stride-2 stages in the critic, the autoencoder and the U-Net
 
 
 def check_size(size: int, flag: str = "--size") -> int:
-    """`size` if it is a positive multiple of 16, else a SasmiError naming `flag`."""
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < SIZE_MULTIPLE \
-            or size % SIZE_MULTIPLE:
-        raise SasmiError(f"{flag} {size}: must be a positive multiple of {SIZE_MULTIPLE}")
-    return int(size)
+    """`size` if it lies in the range of --size (limits.FLAGS), else a SasmiError naming `flag`."""
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)):
+        raise SasmiError(f"{flag} {size!r}: is not a whole number")
+    return FLAGS["--size"].check(int(size), flag)
 
 
 def unit_to_signed(x01: torch.Tensor) -> torch.Tensor:

@@ -32,8 +32,8 @@ def real_chips() -> Path:
 @pytest.fixture(scope="session")
 def render_set(tmp_path_factory) -> Path:
     """8 chips of the paper geometry (targets large enough to measure at 32 px), rendered once per test session by the real renderer."""
-    from sasmi.dataset import RenderJob, render_set as write_set
-    from sasmi.preset import load_preset
+    from sasmi.renderset.write import RenderJob, render_set as write_set
+    from sasmi.scene.preset import load_preset
 
     out = tmp_path_factory.mktemp("renders") / "set"
     write_set(RenderJob(preset=load_preset(REPO / "scenes" / "muscle_paper.toml"), out=out, count=8,

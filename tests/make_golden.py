@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from sasmi.render.mitsuba import Renderer
-from sasmi.scene import Post, Scene, Seafloor, Sonar, Target
+from sasmi.scene.model import Post, Scene, Seafloor, Sonar, Target
 
 
 def golden_image() -> np.ndarray:

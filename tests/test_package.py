@@ -19,19 +19,19 @@ def test_installed_package_works_outside_the_checkout(tmp_path):
     script = """
 import importlib.util, sasmi
 from sasmi import load_preset
-from sasmi.data import RenderSet, RealChips
+from sasmi.atr.datasets import RenderSet, RealChips
 from sasmi.eval import phi_fid
 from sasmi.gan.loop import train
-from sasmi.pipeline import sasgan_settings
+from sasmi.gan.recipes import load_recipe
 assert sasmi.__file__.startswith(TARGET), sasmi.__file__
 assert importlib.util.find_spec("gan") is None
-print(load_preset("cylinder_chip").path.parent.name, sorted(sasgan_settings("baseline")))
+print(load_preset("cylinder_chip").path.parent.name, sorted(load_recipe("baseline")))
 """
     env = {"PYTHONPATH": str(target), "PATH": "/usr/bin:/bin"}
     out = subprocess.run([sys.executable, "-c", f"TARGET = {str(target)!r}\n" + script], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split()[0] == "scenes"
+    assert out.stdout.split()[0] == "presets"  # the installed copy of scenes/, not the checkout's
     version = subprocess.run([sys.executable, "-m", "sasmi", "--version"], cwd=tmp_path, env=env,
                              capture_output=True, text=True, timeout=120)
     assert version.stdout.startswith("sasmi ")

@@ -17,7 +17,7 @@ from sasmi.gan.run import RunConfig
 
 @dataclass(frozen=True)
 class AutoencoderRun(RunConfig):
-    steps: int = 2000  # README's run: the loss flattens out by then at 128²
+    steps: int = 2000  # the reconstruction loss flattens out by then at 128²
     batch: int = 8  # reconstruction is cheap; a larger batch steadies the L2 gradient
     autoencoder: AutoencoderConfig = AutoencoderConfig()
 

@@ -20,7 +20,7 @@ REGULARISERS = ("gp", "r1")
 
 @dataclass(frozen=True)
 class GanRun(RunConfig):
-    steps: int = 1000  # generator updates; README's 128² runs: 700 (SAS GAN) and 900 (DCGAN) were short
+    steps: int = 1000  # generator updates; at 128² the GANs are still improving at 700-900
     betas: tuple[float, float] = (0.5, 0.9)  # WGAN-GP's β2 = 0.9 with DCGAN's β1 = 0.5
     best_from: int = 500  # the Wasserstein estimate is near zero while the critic is still untrained
     n_critic: int = 5  # critic updates per generator update (WGAN-GP)
@@ -33,22 +33,22 @@ class GanRun(RunConfig):
 
     def validate(self) -> "GanRun":
         super().validate()
-        check_number("--n-critic", self.n_critic, 1, 100, integer=True, why="critic updates per generator update")
+        check_number("--n-critic", self.n_critic)
         if self.critic_lr is not None:
-            check_number("--critic-lr", self.critic_lr, 1e-8, 1.0)
+            check_number("--critic-lr", self.critic_lr)
         if self.regulariser not in REGULARISERS:
             raise SasmiError(f"--regulariser {self.regulariser}: expected one of {', '.join(REGULARISERS)}")
-        check_number("--gp-weight", self.gp_weight, 0.0, 1e4)
-        check_number("--r1-gamma", self.r1_gamma, 0.0, 1e4)
+        check_number("--gp-weight", self.gp_weight)
+        check_number("--r1-gamma", self.r1_gamma)
         if self.critic.phi_features and self.critic.patch:
             raise SasmiError("critic.phi_features and critic.patch: choose one (the φ critic's heads see whole maps)")
         if self.critic.phi_features and self.critic.standardise:
             raise SasmiError("critic.phi_features and critic.standardise: choose one (φ reads chips in [-1, 1])")
         a = self.augment
-        check_number("augment.translation", a.translation, 0.0, 0.5)
-        check_number("augment.cutout", a.cutout, 0.0, 1.0)
-        check_number("augment.brightness", a.brightness, 0.0, 1.0)
-        check_number("augment.contrast", a.contrast, 0.0, 1.0)
+        check_number("augment.translation", a.translation)
+        check_number("augment.cutout", a.cutout)
+        check_number("augment.brightness", a.brightness)
+        check_number("augment.contrast", a.contrast)
         return self
 
 

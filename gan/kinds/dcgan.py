@@ -24,7 +24,7 @@ class DcganRun(GanRun):
 
     def validate(self) -> "DcganRun":
         super().validate()
-        check_number("--final-samples", self.final_samples, 0, 10 ** 5, integer=True)
+        check_number("final_samples", self.final_samples)
         if self.critic.phi_features:
             raise SasmiError("critic.phi_features: the DCGAN baseline has no φ; it is the SAS GAN's option")
         return self

@@ -41,21 +41,21 @@ class SasganRun(GanRun):
 
     def validate(self) -> "SasganRun":
         super().validate()
-        check_number("--phi-weight", self.phi_weight, 0.0, 1e6)
-        check_number("--phi-margin", self.phi_margin, 0.0, 10.0, why="a fraction of ‖φ(render)‖")
-        check_number("--ema", self.ema, 0.0, 0.99999, why="0 turns it off")
-        check_number("--mask-weight", self.mask_weight, 0.0, 1e6)
-        check_number("--mask-keep", self.mask_keep, 0.0, 2.0)
-        check_number("mask_rise", self.mask_rise, 0.0, 2.0, why="signed units")
-        check_number("shadow_weight", self.shadow_weight, 0.0, 1e6)
-        check_number("levels_weight", self.levels_weight, 0.0, 1e6)
+        check_number("--phi-weight", self.phi_weight)
+        check_number("--phi-margin", self.phi_margin)
+        check_number("--ema", self.ema)
+        check_number("--mask-weight", self.mask_weight)
+        check_number("--mask-keep", self.mask_keep)
+        check_number("mask_rise", self.mask_rise)
+        check_number("shadow_weight", self.shadow_weight)
+        check_number("levels_weight", self.levels_weight)
         if self.levels_weight > 0 and self.batch < 2:
             raise SasmiError(f"levels_weight = {self.levels_weight:g} compares the chips of a batch: needs --batch 2 or more")
-        check_number("--mask-ring", self.mask_ring, 1, self.size // 2, integer=True, why="pixels, below S/2")
+        check_number("mask_ring", self.mask_ring, high=self.size // 2)
         if self.mask_highlight not in ("mean", "peak"):
             raise SasmiError(f"mask_highlight = {self.mask_highlight!r}: choose \"mean\" or \"peak\"")
         scale = self.generator.correction_scale
-        check_number("generator.correction_scale", scale, 1, 16, integer=True, why="px")
+        check_number("generator.correction_scale", scale)
         if self.generator.tone_curve and not self.generator.residual:
             raise SasmiError("generator.tone_curve needs generator.residual = true (the curve remaps the render)")
         if self.generator.tone_style and not self.generator.tone_curve:
@@ -64,7 +64,7 @@ class SasganRun(GanRun):
         if donor and (self.generator.tone_curve or self.levels_weight > 0):
             raise SasmiError("generator.donor_levels(_after) gives each chip a real chip's gray levels: it replaces "
                              "generator.tone_curve and levels_weight (turn those off)")
-        check_number("generator.donor_shadow", self.generator.donor_shadow, 0.0, 1.0, why="a fraction of the median")
+        check_number("generator.donor_shadow", self.generator.donor_shadow)
         if self.generator.donor_shadow and not donor:
             raise SasmiError("generator.donor_shadow keeps shadows through a donor's levels: needs "
                              "generator.donor_levels or donor_levels_after")
@@ -164,15 +164,15 @@ def build(cfg: SasganRun, inputs: dict[str, Path], device: torch.device) -> Phas
             logs["loss/shadow_shape"] = shape.item()
         if cfg.generator.donor_levels:
             # the net's own levels, which the donor's replace, held at the render's: nothing else
-            # holds them. The plain straight-through gradient drove them to ±1 (ties: one flat gray
-            # chip after the matching, in 600 steps), with this anchor too; `_RanksOnly` removes
-            # that push, and this keeps slower drifts in check. The net keeps choosing the ranks
+            # holds them. A plain straight-through gradient drives them to ±1 (ties: one flat gray
+            # chip after the matching), this anchor or not; `_RanksOnly` removes that push, and
+            # this keeps slower drifts in check. The net keeps choosing the ranks
             anchor = (gray_levels(drawn.own_levels) - gray_levels(render)).abs().mean()
             loss = loss + DONOR_ANCHOR * anchor
             logs["loss/anchor"] = anchor.item()
         if cfg.levels_weight > 0:
             # of the whole image, through the tone curve alone: asked of all of the generator, the
-            # smooth correction met it by painting bright bands beside the shadows (docs/gan.md)
+            # smooth correction meets it by painting bright bands beside the shadows (docs/gan.md)
             levels = energy_distance(gray_levels(drawn.curve_only), real_levels)
             loss = loss + cfg.levels_weight * levels
             logs["loss/levels"] = levels.item()

@@ -10,13 +10,13 @@ One file per job, in pipeline order (clean-fid style: features, then metrics, th
 - sweeps.py        pose sweeps through a renderer and a generator
 - report.py        markdown, metrics.json and figures (text and plots only)
 - config.py        EvalConfig, PreservationConfig, SweepConfig
-- run.py           the whole evaluation as one call (what `sasmi evaluate` runs)
+- evaluate.py      the whole evaluation as one call (what `sasmi evaluate` runs)
 
     from sasmi.eval import phi_fid
     phi_fid("real_chips/", "translated/", phi="runs/ae")    # one number
 
 Definitions: docs/evaluate.md.
 """
-from sasmi.eval.run import evaluate_folders, phi_fid
+from sasmi.eval.evaluate import evaluate_folders, phi_fid
 
 __all__ = ["evaluate_folders", "phi_fid"]

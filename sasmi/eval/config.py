@@ -10,7 +10,7 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class EvalConfig:
     # FID resamples, real splits and precision/recall draws behind each ±; each costs one SVD of at most
-    # N×N. 500: across seeds a ratio moved by up to 0.13 at 100 (runs/fit60's renders), by 0.04 at 500
+    # N×N. 500: at 100 a ratio still moves with the seed several times as much as at 500
     bootstrap: int = 500
     kid_subsets: int = 100  # KID is averaged over this many random subsets; ± is their std
     kid_subset_size: int = 100  # images per KID subset, at most half the smaller set (Bińkowski et al. 2018)

@@ -2,8 +2,8 @@
 
 Recall says how much of the real set the generated chips cover; this says which real chips they
 miss. Each of the least covered is drawn beside the generated chip nearest it in φ, so that one
-sees what the set offers in its place (on the second split, docs/gan.md *Longer shadows*: shadows
-half the chip long and big, bright, irregular highlights, which the preset did not make).
+sees what the set offers in its place (for instance shadows half the chip long, or big, bright,
+irregular highlights that a preset does not make).
 """
 from __future__ import annotations
 

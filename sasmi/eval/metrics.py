@@ -69,7 +69,7 @@ def fid_mean_part(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
 
 def one_blas_thread():
     """Context: BLAS on one thread. The metrics are many small (≤ N×N) products; on a busy
-    machine, OpenBLAS threads waiting for a core made them 50× slower (measured, 2 cores)."""
+    machine, OpenBLAS threads waiting for a core make them many times slower."""
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
@@ -186,17 +186,18 @@ def precision_recall(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3)
 def precision_recall_matched(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n: int = 100,
                              seed: int = 0) -> tuple[Estimate, Estimate]:
     """Precision and recall at equal set sizes: each of `n` replicates draws m = min(|real|, |fake|)
-    of each set (without replacement). A ball's radius shrinks as its set grows, so recall of 39
-    real chips against 400 generated ones read 0.23 where 39 of the same 400 read 0.53: recall
-    fell the more chips one generated. Equal sizes, as in Kynkäänniemi et al. (50k and 50k) and as
-    in the real→real row, make it a property of the distributions; precision's mean is unchanged."""
+    of each set (without replacement). A ball's radius shrinks as its set grows, so recall of a
+    few real chips against many generated ones reads far lower than against as few of them:
+    recall would fall the more chips one generated. Equal sizes, as in Kynkäänniemi et al.
+    (50k and 50k) and as in the real→real row, make it a property of the distributions;
+    precision's mean is unchanged."""
     real = _as_features(feats_real, k + 1, "precision_recall (real)")
     fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
     m = min(len(real), len(fake))
     if len(real) == len(fake):
         n = 1  # nothing to draw: every replicate would be the same
     rng = np.random.default_rng(seed)
-    with one_blas_thread():  # small matrices: threads cost 50 × the work (0.14 s a draw beside a training)
+    with one_blas_thread():  # small matrices: threads cost far more than the work, most of all beside a training
         reps = [precision_recall(real[rng.choice(len(real), m, replace=False)],
                                  fake[rng.choice(len(fake), m, replace=False)], k) for _ in range(n)]
     return _precision_recall_estimates(reps)

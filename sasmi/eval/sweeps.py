@@ -87,7 +87,7 @@ def pose_sweep_from_runs(preset: str | os.PathLike, generator_run: str | os.Path
     from sasmi.gan.generator import load_generator
     from sasmi.gan.translate import translate
     from sasmi.render import Renderer
-    from sasmi.preset import load_preset
+    from sasmi.scene.preset import load_preset
 
     scene = load_preset(preset).sample(cfg.seed, 0)
     generator = load_generator(generator_run, device)

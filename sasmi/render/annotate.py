@@ -13,7 +13,7 @@ import numpy as np
 from sasmi.labels import ChipLabel, TargetLabel, target_geometry
 from sasmi.masks import SEAFLOOR as MASK_SEAFLOOR, SHADOW as MASK_SHADOW, TARGET as MASK_TARGET
 from sasmi.render.seafloor import rocks
-from sasmi.scene import Scene, scene_to_dict
+from sasmi.scene.model import Scene, scene_to_dict
 
 
 ROCK_EXTENT = 3.0  # sigmas of a rock's Gaussian bump that its clutter box spans
@@ -92,7 +92,7 @@ def clutter_in_slant(clutter: tuple[dict, ...], column, size: int, unit: float) 
 
 
 def labels_dict(label: ChipLabel) -> dict:
-    """The label as the dict `Rendered.labels` has always been: scene, targets and size, no index or paths."""
+    """The label as the dict `Rendered.labels` holds: scene, targets and size, no index or paths."""
     record = label.to_json()
     for key in ("index", "image", "mask"):
         record.pop(key)

@@ -43,7 +43,7 @@ from sasmi.render import povray
 from sasmi.render.geometry import build_geometry
 from sasmi.images import write_gray, write_text
 from sasmi.render.mitsuba import Renderer
-from sasmi.scene import Scene
+from sasmi.scene.model import Scene
 
 SPP = 256  # Mitsuba samples per pixel: two seeds against each other give r = 0.998
 SHADOW_RATIO = 0.5  # shadow: less than half the irradiance the bare seafloor gets at that pixel

@@ -19,7 +19,7 @@ from sasmi.render.mitsuba import checked_mitsuba, load_scene, spot_to_world
 from sasmi.render.post import post_fields
 from sasmi.render.seafloor import surface
 from sasmi.render.visibility import pixel_centres
-from sasmi.scene import Scene
+from sasmi.scene.model import Scene
 
 if TYPE_CHECKING:
     import torch
@@ -43,8 +43,8 @@ class BoundScene:
 
     Arrays are Dr.Jit Floats, xyz flattened, chip units. Each bound scene owns its Mitsuba
     scene because a render's AD graph does not survive another render of the same Mitsuba
-    scene: with two scenes rendered in turn on one, only the second one's gradient reached
-    θ (measured). So K scenes in one loss need K bound scenes, and one bound scene holds one
+    scene: with two scenes rendered in turn on one, only the second one's gradient reaches
+    θ. So K scenes in one loss need K bound scenes, and one bound scene holds one
     differentiable image at a time.
     """
     scene: Scene
@@ -192,7 +192,7 @@ class DifferentiableRenderer:
         g = b.geometry
         # θ and the scene's constants enter as opaque variables: one compiled kernel serves every
         # value and every scene, and Dr.Jit 1.5's literal folding never sees them (array * literal
-        # 0.0 resized the literal operand in place in our tests).
+        # 0.0 can resize the literal operand in place).
         dr.make_opaque(theta)
         roughness, albedo, intensity, altitude = (dr.gather(mi.Float, theta, i) for i in range(len(PARAMETERS)))
         height = altitude * self._opaque(2.0 / b.scene.sonar.chip_size)  # chip units

@@ -16,7 +16,7 @@ import numpy as np
 
 from sasmi.errors import SasmiError
 from sasmi.render.seafloor import Surface, surface
-from sasmi.scene import Scene, Target
+from sasmi.scene.model import Scene, Target
 
 CYLINDER_SECTIONS = 32  # fixed so every cylinder has the same vertex count (kernel reuse)
 SPHERE_SUBDIVISIONS = 3
@@ -24,7 +24,7 @@ BOULDER_LUMPS = ((6, 0.6), (24, 0.3))  # (bumps, angular width in rad) per scale
 TORUS_SECTIONS = (32, 12)  # around the ring, around the tube: 384 vertices, fixed as for cylinders
 
 
-# backscatter -> power of cos(incidence) in the radiance; rough: 0 (even) measured further from real rock than 0.5
+# backscatter -> power of cos(incidence) in the radiance; rough: 0.5, as an even 0 lies further from real rock
 COS_POWER = {"lambert": 1, "lambert2": 2, "rough": 0.5}
 
 

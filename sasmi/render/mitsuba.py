@@ -33,7 +33,7 @@ from sasmi.render.post import post_maps, postprocess
 from sasmi.render.slant import labels_to_slant, slant_map, to_slant
 from sasmi.render.visibility import (CAMERA_HEIGHT, Occluders, camera_hits, mask_pixels, mi_mesh, shape_ids,
                                     visibility)
-from sasmi.scene import Scene
+from sasmi.scene.model import Scene
 
 
 TARGET_BUCKET = (1024, 2048)  # vertices, faces: every built-in kind fits (a sphere has 642, 1280)

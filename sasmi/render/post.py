@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 
 from sasmi.render.geometry import Geometry, exposure, flat_floor_irradiance
-from sasmi.scene import Scene
+from sasmi.scene.model import Scene
 
 Maps = tuple[np.ndarray, np.ndarray, np.ndarray]  # (H, W) float64 each: gain, speckle, offset
 FWHM_PER_SIGMA = 2 * math.sqrt(2 * math.log(2))
@@ -89,7 +89,7 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
         noise = rng.normal(0.0, post.noise_std, size=(size, size))
     offset = noise + post.noise_floor * speckle  # the background has no sediment texture
     floor = scene.seafloor
-    if floor.patchiness > 0:  # its own stream: chips without texture keep the draws they had
+    if floor.patchiness > 0:  # its own stream: the texture changes none of the chip's other draws
         sigma = floor.patch_size / pixel / FWHM_PER_SIGMA
         speckle = speckle * correlated_gamma(np.random.default_rng([scene.seed, 12]), floor.patchiness**-2, size,
                                              sigma, sigma)

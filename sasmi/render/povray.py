@@ -41,7 +41,7 @@ import numpy as np
 
 from sasmi.errors import SasmiError
 from sasmi.render.geometry import Geometry, TriangleMesh, build_geometry
-from sasmi.scene import Scene
+from sasmi.scene.model import Scene
 
 POVRAY = "povray"
 INSTALL_HINT = "POV-Ray not found on PATH: install it with `sudo apt-get install povray` (`make setup` does this)"

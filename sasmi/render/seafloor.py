@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sasmi.scene import Seafloor
+from sasmi.scene.model import Seafloor
 
 FLOOR_SAMPLES = 256  # rough-surface grid points across the chip (a fast FFT size)
 ROCK_REACH = 7.5  # sigmas: a rock ends where it adds exp(-28) < 1e-12 of its height, below float32's resolution

@@ -1,0 +1,46 @@
+"""`sasmi fit-scene PRESET --phi RUN --real DIR --params a,b --steps N --out DIR`.
+
+Adjust scale factors on a preset's parameters by gradient descent so that the mean φ of its renders
+approaches the mean φ of real chips. Writes trajectory.csv, loss.png, fitted.toml (a preset for
+`sasmi render`) and fit_scene.json. See docs/differentiable.md.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from sasmi.realism.fit_scene import FitConfig
+    from sasmi.render.differentiable import PARAMETERS
+
+    defaults = FitConfig()
+    p = sub.add_parser("fit-scene", help="fit scene parameters to real chips through the differentiable render",
+                       description=__doc__)
+    p.add_argument("preset", type=Path, help="scene preset (TOML) to start from")
+    p.add_argument("--phi", type=Path, required=True, metavar="RUN", help="a trained autoencoder run (φ)")
+    p.add_argument("--real", type=Path, required=True, metavar="DIR", help="real chips, searched recursively")
+    p.add_argument("--params", default=",".join(defaults.params),
+                   help=f"comma-separated, from: {', '.join(PARAMETERS)} (default: {','.join(defaults.params)})")
+    p.add_argument("--steps", type=int, default=defaults.steps, help="Adam steps")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--size", type=int, help="render size (default: the size the φ encoder was trained at)")
+    p.add_argument("--spp", type=int, default=defaults.spp, help="samples per pixel")
+    p.add_argument("--scenes", type=int, default=defaults.scenes,
+                   help=f"scenes of the preset rendered per step (default: {defaults.scenes})")
+    p.add_argument("--lr", type=float, default=defaults.lr,
+                   help=f"Adam rate on log-scales (default: {defaults.lr})")
+    p.add_argument("--seed", type=int, default=defaults.seed, help="preset draws and sample streams (default: 0)")
+    p.add_argument("--no-speckle", dest="speckle", action="store_false",
+                   help="fit noise-free renders (default: the preset's speckle and noise as fixed fields)")
+    p.set_defaults(run=run_fit)
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    from sasmi.realism.fit_scene import FitConfig, fit_to_real, parse_params
+
+    cfg = FitConfig(params=parse_params(args.params), steps=args.steps, lr=args.lr, scenes=args.scenes,
+                    size=args.size, spp=args.spp, seed=args.seed, speckle=args.speckle)
+    out = fit_to_real(args.preset, args.phi, args.real, cfg, args.out)
+    print(f"wrote {out}/fitted.toml, trajectory.csv, loss.png")
+    return 0

@@ -1,0 +1,71 @@
+"""`sasmi generate PRESET --generator RUN --count N --out DIR`: render and translate, streamed.
+
+Render scenes 0..N-1 of a preset and pass each batch through a SAS GAN generator; writes a render
+set (images/, masks/, labels.jsonl, run.json) whose images are the translations. Rerunning the same
+command resumes.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+from pathlib import Path
+
+from sasmi.cli.common import add_translation_flags, generator_from
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("generate", help="render scenes and translate them with a trained SAS GAN, labels kept",
+                       description=__doc__)
+    p.add_argument("preset", type=Path, help="scene preset (TOML)")
+    p.add_argument("--count", type=int, default=16, help="number of scenes")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--seed", type=int, default=0, help="scene i depends only on (seed, i)")
+    p.add_argument("--size", type=int, help="render size, a multiple of 16 (default: the size the generator "
+                                            "was trained at; another size is resampled to it and back)")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel")
+    p.add_argument("--workers", type=int, default=1, help="render processes")
+    p.add_argument("--floors", metavar="DIR",
+                   help="lay each render's target and shadow on a real seafloor chip first, as `sasmi fit --floors` "
+                        "did for the generator it trained (needs --real)")
+    p.add_argument("--real", metavar="DIR", help="with --floors: the real target chips the floors are matched to "
+                                                  "(the --real of that `sasmi fit`)")
+    add_translation_flags(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from sasmi.renderset.write import RenderJob, render_set
+    from sasmi.errors import SasmiError
+    from sasmi.realism.floors import floor_for, floor_label, matching_floors, on_floor
+    from sasmi.images import list_images
+    from sasmi.scene.preset import load_preset
+
+    if bool(args.floors) != bool(args.real):
+        raise SasmiError("--floors and --real: give both (the floors are matched to the real target chips) or neither")
+    for flag, folder in (("--floors", args.floors), ("--real", args.real)):
+        if folder and not list_images(folder):
+            raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
+    preset = load_preset(args.preset)
+    generator = generator_from(args)
+    from sasmi.gan.translate import translate
+    job = RenderJob(preset=preset, out=args.out, count=args.count, seed=args.seed,
+                    size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
+    identity = {"generator": str(Path(args.generator).resolve()),
+                "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
+    floors = matching_floors(args.floors, args.real, job.size) if args.floors else []
+    if floors:
+        identity["floors"] = sorted({str(Path(f).resolve()) for f in floors})
+
+    def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
+        if floors:
+            images = np.stack([on_floor(image, mask, floor_for(floors, args.seed, i, job.size))
+                               for image, mask, i in zip(images, masks, indices)])
+        # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
+        return translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
+
+    relabel = (lambda label, i: floor_label(label, floors, args.seed, i)) if floors else None
+    render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel)
+    print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}")
+    return 0

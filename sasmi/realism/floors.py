@@ -1,0 +1,202 @@
+"""Renders' targets and shadows on real seafloor chips: the real sonar's floor, the render's geometry and labels.
+
+A render's floor is the preset's idea of the seabed, and it is what renders miss most: the real
+chips that renders cover least are the ones with brighter, more textured floors, bands along
+track and their own range profiles (docs/gan.md, *Real floors*). Real seafloor
+chips are the plentiful part of real SAS data. Each composite keeps the render's target and
+shadow as ratios to the render's own floor level, under the multiplicative speckle model, and
+lays them on a real floor chip scaled to that chip's floor level. Everything else is the real
+floor's seabed, under speckle moved along track so that no composite is a real chip pixel for
+pixel. The geometry is the render's, so its masks and labels still hold.
+
+A seafloor folder may mix sonars (the shared chips hold MILCO, KLSG and SASSED floors, the
+target chips only MILCO). For each real target chip, the floor chip with the nearest floor
+statistics (`sasmi stats`: levels, speckle, correlation, periodicity) and the next nearest are
+kept (FLOOR_CHOICES), and renders draw their floors from that list. Each floor is the seabed of
+one chip of that list under the speckle of another, with the slow gain swings along track that
+real swaths show (`fresh_floor`).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from sasmi.errors import SasmiError
+from sasmi.eval.config import PreservationConfig
+from sasmi.images import list_images, write_gray
+from sasmi.labels import ChipLabel
+from sasmi.chips.stats import chip_statistics, floor_level
+
+# floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor. far_near: seafloor chips
+# may fall off less along range than target chips, and the composites (and the GAN trained on them) keep the floor's
+FLOOR_STATISTICS = ("p50", "p99", "looks", "acf_range", "acf_track", "periodicity", "far_near")
+FEATHER = 2          # px the target and shadow masks grow by before they are blended in
+LOST = PreservationConfig()  # `sasmi evaluate`'s lost target: nothing above the blurred floor's bright percentile
+VISIBLE = 1.1        # the least `_visibility` of a composite's highlight (see on_floor)
+LIFTS = 4            # lifts of the highlight towards it: the blur mixes the unlifted floor into the peak
+# floors kept per target chip: two give the composites more floors and more recall of real targets for a
+# small phi cost, three more recall at twice the cost (docs/gan.md, *Why each part*; figures in docs/results.md)
+FLOOR_CHOICES = 2
+SEABED = 4.0         # px: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
+# gain swings along track, as a swath's gain swings from ping to ping: each floor's rows times exp(s * noise),
+# s drawn in [0, BANDS], the noise of unit spread and correlated over BAND_LENGTH px. Up to 0.1 they raise recall
+# of held-out targets at no phi cost; stronger or longer bands cost several times more (docs/gan.md, *Why each part*)
+BANDS = 0.1
+BAND_LENGTH = 8.0
+
+
+def matching_floors(floors: str | os.PathLike, targets: str | os.PathLike, size: int) -> list[Path]:
+    """For each chip of `targets`, the FLOOR_CHOICES chips of `floors` nearest in FLOOR_STATISTICS (repeats kept).
+
+    Distances are in units of the target chips' interquartile range of each statistic, so
+    that a statistic that varies little among the targets weighs more.
+    """
+    floor_stats = chip_statistics(floors, size=size)
+    target_stats = chip_statistics(targets, size=size)
+    f = np.stack([floor_stats["per_chip"][k] for k in FLOOR_STATISTICS], 1)   # (F, S)
+    t = np.stack([target_stats["per_chip"][k] for k in FLOOR_STATISTICS], 1)  # (T, S)
+    q25, q75 = np.nanpercentile(t, [25, 75], axis=0)
+    scale = np.where(q75 > q25, q75 - q25, 1.0)
+    distance = np.nansum(((t[:, None] - f[None]) / scale) ** 2, axis=-1)        # (T, F); NaN: no evidence
+    paths = list_images(floors)  # chip_statistics' order
+    nearest = np.argsort(distance, axis=1, kind="stable")[:, :FLOOR_CHOICES]  # (T, FLOOR_CHOICES)
+    return [paths[i] for i in nearest.ravel()]
+
+
+def _tail(image: np.ndarray, where: np.ndarray) -> float:
+    """The bright percentile of the blurred image over `where`, as `sasmi evaluate` takes it."""
+    return float(np.percentile(ndimage.gaussian_filter(image, LOST.smooth)[where], LOST.bright_percentile))
+
+
+def _visibility(image01: np.ndarray, target: np.ndarray, floor: np.ndarray) -> float:
+    """A target's blurred peak over the blurred floor's bright percentile: `sasmi evaluate` loses a target below 1."""
+    blurred = ndimage.gaussian_filter(image01, LOST.smooth)
+    return float(blurred[target].max() / max(np.percentile(blurred[floor], LOST.bright_percentile), 1e-6))
+
+
+def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.ndarray:
+    """(H, W) in [0, 1]: the render's target and shadow on a real floor chip of the same shape.
+
+    mask (H, W) uint8: 0 seafloor, 1 target, 2 shadow (a render set's masks/).
+    """
+    if render01.shape != mask.shape or render01.shape != floor01.shape:
+        raise SasmiError(f"on_floor: render {render01.shape}, mask {mask.shape} and floor {floor01.shape} differ")
+    render, floor = render01.astype(np.float64), floor01.astype(np.float64)
+    if not (mask > 0).any() or not (mask == 0).any():
+        return floor.astype(np.float32)
+    ratio = render / floor_level(render, mask == 0)[None]  # the render against its own floor
+    level = floor_level(floor)[None]
+    laid = level * ratio                                   # the same ratios on the real floor
+    if (mask == 1).any():
+        # a rocky real floor has a brighter tail than the render's: lift the highlight with it, as far
+        # above the tail as it stood in the render (else `sasmi evaluate` counts it lost)
+        lift = _tail(floor / level, np.ones_like(mask, bool)) / max(_tail(ratio, mask == 0), 1e-6)
+        laid = np.where(mask == 1, laid * max(lift, 1.0), laid)
+    region = ndimage.binary_dilation(mask > 0, iterations=FEATHER)
+    weight = np.maximum(ndimage.gaussian_filter(region.astype(np.float64), 1.0), region)
+    out = np.clip((1.0 - weight) * floor + weight * laid, 0.0, 1.0)
+    # a faint render target (visibility under 1) that `sasmi evaluate` still finds is found
+    # through the render's speckle beside it, which the real floor replaces: lifting each to
+    # VISIBLE keeps it found. Each target on its own, or a dim companion beside a bright one is lost
+    objects, count = ndimage.label(mask == 1)
+    for k in range(1, count + 1):
+        target = objects == k
+        wanted = max(_visibility(render, target, mask == 0), VISIBLE)
+        for _ in range(LIFTS):
+            got = _visibility(out, target, mask == 0)
+            if got >= wanted or got <= 0.0:  # a black target cannot be scaled up
+                break
+            out = np.where(target, np.clip(out * wanted / got, 0.0, 1.0), out)
+    return out.astype(np.float32)
+
+
+def gain_bands(rows: int, rng: np.random.Generator) -> np.ndarray:
+    """(rows,) > 0: a gain per row along track, exp(s * noise) with s in [0, BANDS] and the noise correlated over BAND_LENGTH."""
+    pad = int(4 * BAND_LENGTH)
+    noise = ndimage.gaussian_filter1d(rng.standard_normal(rows + 2 * pad), BAND_LENGTH)[pad:pad + rows]
+    return np.exp(rng.uniform(0.0, BANDS) * noise / max(noise.std(), 1e-9))
+
+
+def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(H, W) in [0, 1]: the seabed of one floor chip under the speckle of another, with gain bands along track.
+
+    A chip blurred over SEABED px is its seabed (patches, its range profile); the chip over that
+    seabed is its speckle, which the multiplicative model makes independent of the seabed. The
+    speckle moves along track by a quarter to three quarters of the chip, wrapping round: without
+    it every composite is its floor chip pixel for pixel outside the target, which `sasmi
+    evaluate`'s copying detector flags. Another matched chip's speckle also brings the composites
+    nearer held-out real chips, and the gain bands (`gain_bands`) reach chips the floor chips alone
+    do not (docs/gan.md, *Real floors*).
+    """
+    def seabed_of(chip: np.ndarray) -> np.ndarray:
+        return ndimage.gaussian_filter(chip.astype(np.float64), SEABED) + 1e-3
+
+    if seabed01.shape != speckle01.shape:
+        raise SasmiError(f"fresh_floor: seabed chip {seabed01.shape} and speckle chip {speckle01.shape} differ")
+    speckle = speckle01.astype(np.float64) / seabed_of(speckle01)
+    shift = int(rng.integers(speckle.shape[0] // 4, 3 * speckle.shape[0] // 4 + 1))
+    seabed = seabed_of(seabed01) * gain_bands(seabed01.shape[0], rng)[:, None]
+    return np.clip(seabed * np.roll(speckle, shift, axis=0), 0.0, 1.0).astype(np.float32)
+
+
+def _draw(choices: list[Path], seed: int, index: int) -> tuple[np.random.Generator, Path, Path, bool]:
+    """Chip `index`'s floor chips (seabed, speckle), whether the seabed is flipped, and the stream that goes on."""
+    rng = np.random.default_rng([seed, index])
+    seabed, speckle = (choices[i] for i in rng.integers(len(choices), size=2))
+    return rng, seabed, speckle, bool(rng.random() < 0.5)
+
+
+def floor_for(choices: list[Path], seed: int, index: int, size: int) -> np.ndarray:
+    """(size, size) in [0, 1]: chip `index`'s floor, the seabed of one chip of `choices` (flipped up-down
+    half the time: along track has no direction) under the speckle of another (`fresh_floor`), from a
+    stream seeded by (seed, index) alone: the same in any batch."""
+    from sasmi.preprocess import load_image
+
+    rng, seabed, speckle, flipped = _draw(choices, seed, index)
+    seabed_chip, speckle_chip = load_image(seabed, size), load_image(speckle, size)
+    if flipped:
+        seabed_chip = seabed_chip[::-1]
+    return fresh_floor(seabed_chip, speckle_chip, rng)
+
+
+def floor_label(label: ChipLabel, choices: list[Path], seed: int, index: int) -> ChipLabel:
+    """A render's label for its composite on `floor_for(choices, seed, index)`: the geometry holds, but the
+    rendered floor's rocks are gone (the composite keeps only the target and shadow masks), so its clutter goes,
+    and which real chips made the floor is recorded. `seafloor` and `post` still say how the render was drawn."""
+    _, seabed, speckle, flipped = _draw(choices, seed, index)
+    floor = {"seabed": str(seabed), "speckle": str(speckle), "seabed_flipped": flipped}
+    return replace(label, clutter=(), extra={**label.extra, "floor": floor})
+
+
+def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targets: str | os.PathLike,
+                     out: str | os.PathLike, size: int, seed: int = 0) -> int:
+    """Write every chip of the render set `renders` on a real floor into `out` (a render set, labels carried).
+
+    Chip i (the i-th image) takes `floor_for(matching_floors(floors, targets), seed, i)`, as
+    `sasmi generate --floors` does for scene i; returns the count.
+    """
+    from sasmi.gan.translate import carry_labels
+    from sasmi.masks import read_mask
+    from sasmi.preprocess import load_image
+
+    renders, out = Path(renders), Path(out)
+    if not list_images(floors):
+        raise SasmiError(f"--floors {floors}: no image (png, jpg, tif, tiff, npy) in it")
+    paths = list_images(renders / "images")
+    if not paths or not (renders / "masks").is_dir():
+        raise SasmiError(f"{renders}: not a render set (images/ and masks/)")
+    choices = matching_floors(floors, targets, size)
+    for index, path in enumerate(paths):
+        floor = floor_for(choices, seed, index, size)
+        render = load_image(path, size)
+        mask = read_mask(renders / "masks" / f"{path.stem}.png")
+        if mask.shape != render.shape:
+            raise SasmiError(f"{renders / 'masks' / path.stem}.png: mask {mask.shape} against image {render.shape}")
+        write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor))
+    position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_for(..., i)
+    carry_labels(renders, out, lambda label: floor_label(label, choices, seed, position[Path(label.image).stem]))
+    return len(paths)
