@@ -113,6 +113,7 @@ FLAGS: dict[str, Range] = {
     "--mask-weight": Range(0.0, 1e6, "weight of the mask contrast term; 0 turns it off"),
     "--mask-keep": Range(0.0, 2.0, "a fraction of the render's own contrast"),
     "--seeds": Range(1, 100, "each seed is one more training per regime", int),
+    "--real-per-class": Range(1, 100_000, "real training chips drawn per class; 'all' takes every one", int),
     "--bootstrap": Range(2, 100_000, "a ± needs 2 resamples; each resample recomputes one FID", int),
     "--scenes": Range(1, 256, "scenes rendered per fit step; time grows linearly", int),
     "--columns": Range(1, 256, "tiles per row of a contact sheet", int),
@@ -200,3 +201,15 @@ MAX_CHOICES = 10_000  # entries of one {choice = [...]}
 def field_range(section: str, name: str) -> Range:
     """The range of preset field `section.name` ("targets" for every target); GENERIC if not listed."""
     return FIELDS.get(f"{section}.{name}", GENERIC)
+
+
+def markdown_table() -> str:
+    """Every range as the table docs/errors.md carries."""
+    def bound(r: Range) -> str:
+        text = r.allowed()
+        return text[: -len(r.why) - 2] if r.why and text.endswith(r.why) else text
+
+    rows = ["| flag, recipe key or preset field | allowed | why |", "|---|---|---|"]
+    for table in (FLAGS, SETTINGS, FIELDS):
+        rows += [f"| `{name}` | {bound(r)} | {r.why} |" for name, r in table.items()]
+    return "\n".join(rows) + "\n"

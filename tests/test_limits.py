@@ -77,3 +77,10 @@ def test_no_range_is_declared_outside_the_table():
                 if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) == "Range":
                     found.append(f"{path.relative_to(REPO)}:{node.lineno}")
     assert not found, found
+
+
+def test_the_docs_carry_the_table_as_the_code_states_it():
+    from sasmi.limits import markdown_table
+
+    assert markdown_table() in (REPO / "docs" / "errors.md").read_text(), \
+        "docs/errors.md: paste sasmi.limits.markdown_table() over its table"

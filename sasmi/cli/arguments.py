@@ -56,6 +56,17 @@ def flag(name: str) -> Callable[[str], Any]:
     return ranged(limits.FLAGS[name])
 
 
+def flag_or_all(name: str) -> Callable[[str], Any]:
+    """The type of a flag listed in limits.FLAGS that also takes the word "all" (-> None)."""
+    number = flag(name)
+
+    def convert(text: str):
+        return None if text == "all" else number(text)
+
+    convert.__name__, convert.range = number.__name__, number.range
+    return convert
+
+
 def existing_folder(text: str) -> Path:
     path = Path(text)
     if not path.exists():
@@ -104,6 +115,8 @@ def apply_limits(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         for action in p._actions:
             names = set(action.option_strings)
             for name in names & set(limits.FLAGS):
+                if getattr(action.type, "range", None) is limits.FLAGS[name]:
+                    continue  # already the table's range (flag_or_all)
                 if action.type not in (None, int, float):
                     raise TypeError(f"{name}: declare it with type=int or float; its range is limits.FLAGS[{name!r}]")
                 action.type = flag(name)

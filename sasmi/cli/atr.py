@@ -4,17 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _per_class(text: str) -> int | None:
-    if text == "all":
-        return None
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: a whole number >= 1, or 'all'") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"{n}: a whole number >= 1, or 'all'")
-    return n
+from sasmi.cli.arguments import flag_or_all
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -41,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--seeds", type=int, default=5, help="runs per training set, each with its own seed")
     a.add_argument("--size", type=int, default=128, help="chip size in px, a multiple of 16")
     a.add_argument("--steps", type=int, default=300, help="training batches per run")
-    a.add_argument("--real-per-class", type=_per_class, nargs="+", default=[None], metavar="N|all",
+    a.add_argument("--real-per-class", type=flag_or_all("--real-per-class"), nargs="+", default=[None], metavar="N|all",
                    help="real training chips drawn per class and seed (default: all); several values run several benches")
     a.set_defaults(run=run_atr_bench)
 
