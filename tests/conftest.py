@@ -13,7 +13,7 @@ FAILURES = REPO / "tests" / "_failures"
 
 @pytest.fixture(autouse=True, scope="session")
 def _torch_one_thread():
-    """Tiny tensors on a 2-core machine beside Dr.Jit's own threads: more torch threads only wait on each other."""
+    """Tiny tensors on a machine of few cores beside Dr.Jit's own threads: more torch threads only wait on each other."""
     import torch
 
     threads = torch.get_num_threads()

@@ -1,4 +1,4 @@
-"""Mask PNGs: palette masks (as sasmi writes them) and plain gray ones (older render sets) read back as ids."""
+"""Mask PNGs: palette masks (as sasmi writes them) and plain gray ones read back as ids."""
 from __future__ import annotations
 
 import numpy as np

@@ -72,7 +72,7 @@ def test_cli_writes_linked_folders(tmp_path, capsys):
             assert all((out / side / category / f).resolve() == (root / category / f).resolve() for f in files)
     assert main(["split", str(root), "--out", str(out)]) == 2  # never over an existing split
     assert "exists already" in capsys.readouterr().err
-    # each side carries its own MANIFEST, so train can be split again (a tuning split on train alone)
+    # each side carries its own MANIFEST, so train can be split again (to tune on train alone)
     inner = tmp_path / "tune"
     assert main(["split", str(out / "train"), "--out", str(inner)]) == 0
     tune = json.loads((inner / "split.json").read_text())

@@ -140,13 +140,13 @@ def test_real_chips_targets_found_where_they_are(real_chips):
     seafloor = chip_statistics(real_chips / "seafloor", 128)
     assert targets["targets_found"] >= 0.75
     assert seafloor["targets_found"] <= 0.05
-    assert 10 <= targets["summary"]["shadow_length"]["median"] <= 40  # the issue's estimator: 25 px
+    assert 10 <= targets["summary"]["shadow_length"]["median"] <= 40  # real shadows run a few tens of px at 128 px
     assert 0.03 <= targets["summary"]["shadow_floor"]["median"] <= 0.25  # shadows are not black
 
 
 @pytest.fixture(scope="module")
 def renders(tmp_path_factory) -> Path:
-    """8 chips of today's cylinder preset at 64 px, 4 spp."""
+    """8 chips of the shipped cylinder preset at 64 px, 4 spp."""
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.scene.preset import load_preset
 

@@ -204,7 +204,7 @@ def test_nearest_and_copy_statistics():
 
 
 def dense_distances(a, b):
-    """The N × N reference the blocked code replaced: every distance at once, in float64."""
+    """The plain N × N reference for the blocked code: every distance at once, in float64."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return np.sqrt(np.clip((a**2).sum(1)[:, None] + (b**2).sum(1)[None, :] - 2.0 * a @ b.T, 0.0, None))
 

@@ -1,8 +1,7 @@
 """The training phases do what their names say: tests that fail when the loop is wrong.
 
-Each was checked against a deliberate mutation (docs/gan.md lists which test caught which):
-real and fake swapped in the critic loss, the gradient penalty dropped, the φ term dropped,
-a generator step that does not update the generator.
+Each fails under one deliberate mutation of the loop: real and fake swapped in the critic loss,
+the gradient penalty dropped, the φ term dropped, a generator step that does not update the generator.
 """
 from dataclasses import replace
 
@@ -62,8 +61,8 @@ def test_critic_separates_real_from_fake_in_a_few_steps():
 def test_gradient_penalty_keeps_the_critic_near_1_lipschitz():
     with_gp = _interpolate_grad_norm(*_trained_critic(gp_weight=10.0)[:3])
     without = _interpolate_grad_norm(*_trained_critic(gp_weight=0.0)[:3])
-    assert with_gp < 3.0, with_gp  # measured 1.5
-    assert without > 2 * with_gp, (with_gp, without)  # measured 15: the penalty is what holds it
+    assert with_gp < 3.0, with_gp  # near 1: the penalty's target
+    assert without > 2 * with_gp, (with_gp, without)  # the penalty is what holds it
 
 
 @pytest.fixture(scope="module")
@@ -125,4 +124,4 @@ def test_phi_weight_keeps_the_generator_near_the_render(data):
             phases.generator_step()
         with torch.no_grad():
             distance[weight] = phi_loss(encoder(renders), encoder(phases.state["generator"](renders)), 0.0).item()
-    assert distance[1000.0] < 0.5 * distance[0.0], distance  # measured 0.04 against 0.13
+    assert distance[1000.0] < 0.5 * distance[0.0], distance  # the φ term holds the output near its render

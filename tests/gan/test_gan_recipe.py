@@ -308,8 +308,8 @@ def test_shadow_shape_term_darkens_a_shadow_paled_above_the_dark_threshold():
 
 
 def test_shadow_shape_term_pulls_an_overdone_shadow_back_to_its_render():
-    # hinges were met with a margin: the generator learnt shadows darker than the render's and a
-    # bright rim beside them (runs/fit70). Each change here lies beyond the blur's reach (4 px) of
+    # hinges are met with a margin: the generator learns shadows darker than the render's and a
+    # bright rim beside them. Each change here lies beyond the blur's reach (4 px) of
     # the other side of the shadow's edge, so that only a two-sided term sees it
     masks = torch.zeros(1, 1, SIZE, SIZE, dtype=torch.uint8)
     masks[..., 8:24, 8:12], masks[..., 8:24, 12:28] = 1, 2  # a 16 × 16 px shadow

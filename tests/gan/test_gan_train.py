@@ -269,4 +269,4 @@ def test_translate_shows_the_generator_what_training_showed_it(shape, seen, scal
     expected = resize(resize(x, scaled), shape)[:, 0].numpy()  # the padding is cropped off again
     np.testing.assert_allclose(out, expected, atol=1e-6)
     squashed = resize(resize(x, (32, 32)), shape)[:, 0].numpy()
-    assert np.abs(out - squashed).mean() > 0.01  # what the old path did differs
+    assert np.abs(out - squashed).mean() > 0.01  # squashing to the training square would differ

@@ -201,7 +201,7 @@ def test_checkpoints_from_before_the_config_moved_inside_still_load(tmp_path, ru
     run = tmp_path / "old"
     (run / "checkpoints").mkdir(parents=True)
     ckpt = torch.load(runs["gan"] / "checkpoints" / "last.pt", weights_only=True)
-    old = {k: ckpt[k] for k in ("step", "torch_rng", "state")}  # the old format: no kind, no config
+    old = {k: ckpt[k] for k in ("step", "torch_rng", "state")}  # no kind, no config: the run's config.json has them
     old["state"] = {k: v for k, v in old["state"].items() if k != "generator_ema"}
     torch.save(old, run / "checkpoints" / "last.pt")
     (run / "config.json").write_text((runs["gan"] / "config.json").read_text())

@@ -105,9 +105,9 @@ def test_gray_level_term_brings_the_image_to_the_real_levels_through_the_curve_a
     """The toy renders are a flat 0.35 floor; the real chips a skewed gamma speckle. A fixed
     correction that brightens everything stands for what the critic asks of the spatial net. The
     term must bring the levels the image ends with to real (the curve makes room for the
-    correction) and train the curve alone: asked of the whole generator, the correction met it by
-    painting bright bands beside the shadows; asked of the curve's output, the levels that the
-    correction then moved stayed off."""
+    correction) and train the curve alone: asked of the whole generator, the correction meets it by
+    painting bright bands beside the shadows; asked of the curve's output, it misses the levels that
+    the correction then moves."""
     renders = ImageSet(data["renders"], SIZE).center(list(range(8)))
     real = ImageSet(data["real"], SIZE)
     real_levels = gray_levels(real.center(list(range(len(real)))))

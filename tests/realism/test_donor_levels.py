@@ -55,8 +55,8 @@ def test_each_chip_takes_the_chosen_real_chips_levels_and_keeps_its_ranks():
 def test_the_gradient_moves_ranks_only():
     """The net cannot change a donor's levels, only each pixel's rank: the gradient passes straight
     through the matching, less its parts along a shift or a stretch of the chip's own levels, which
-    keep every rank (left in, those added up until the net's own levels sat at ±1 and the chips
-    went flat)."""
+    keep every rank (left in, those add up until the net's own levels sit at ±1 and the chips
+    go flat)."""
     generator = _generator_with_donors(_real())
     renders = torch.rand(2, 1, 32, 32, generator=torch.Generator().manual_seed(3)) * 0.6 - 0.8
     code = torch.zeros(2, 1)

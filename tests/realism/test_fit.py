@@ -144,11 +144,11 @@ def test_fit_takes_the_phi_chips_seafloor_as_floors_unless_told_not_to(tmp_path)
     assert plan("--phi-real", str(train), "--no-floors").floors == ""
     assert plan("--phi-real", str(train), "--floors", str(tmp_path / "mine")).floors == str(tmp_path / "mine")
     assert plan().floors == ""  # --real alone: a targets folder has no seafloor/
-    assert "floors" not in plan("--no-floors").identity()  # runs from before --floors still resume
+    assert "floors" not in plan("--no-floors").identity()  # a fit.json without floors matches a --no-floors rerun
 
 
 def test_fit_reports_on_the_splits_validation_chips_unless_told_otherwise(tmp_path):
-    """The issue's command names only train folders: its report must still be on validation chips."""
+    """A command that names only train folders still gets its report on validation chips."""
     from sasmi.cli.main import build_parser
     from sasmi.realism.fit import FitPlan, with_defaults
 

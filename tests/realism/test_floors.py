@@ -64,8 +64,8 @@ def test_on_floor_lifts_a_faint_highlight_out_of_the_speckle():
 
 
 def test_on_floor_lifts_a_faint_companion_beside_a_bright_target():
-    """Each target is lifted on its own: a dim companion far from a bright target is found too (with one
-    lift for the brightest, the companion stayed under the floor's bright tail)."""
+    """Each target is lifted on its own: a dim companion far from a bright target is found too (one lift
+    for the brightest alone leaves the companion under the floor's bright tail)."""
     from scipy.ndimage import gaussian_filter
 
     render, mask = _scene()
@@ -77,7 +77,7 @@ def test_on_floor_lifts_a_faint_companion_beside_a_bright_target():
     blurred = gaussian_filter(out.astype(np.float64), 1.5)
     tail = np.percentile(blurred[mask == 0], 99)
     assert blurred[28:34, 20:24].max() > 1.09 * tail
-    assert blurred[6:12, 40:44].max() > tail  # found by `sasmi evaluate` (0.88 x the tail before)
+    assert blurred[6:12, 40:44].max() > tail  # found by `sasmi evaluate`: unlifted it sits under the tail
 
 
 def test_matching_floors_picks_the_targets_sonar(tmp_path):
@@ -95,8 +95,8 @@ def test_matching_floors_picks_the_targets_sonar(tmp_path):
 
 
 def test_matching_floors_keeps_the_next_nearest_floor_too(tmp_path):
-    """One target chip: both floors of its sonar are kept, not only the nearest (the nearest alone left about
-    35 distinct floors for 400 composites), and no floor of the other sonar."""
+    """One target chip: both floors of its sonar are kept, not only the nearest (the nearest alone gives the
+    composites few distinct floors), and no floor of the other sonar."""
     targets, floors = tmp_path / "targets", tmp_path / "floors"
     cols = np.arange(SIZE)[None, :]
     render, _ = _scene()

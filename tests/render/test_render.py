@@ -235,7 +235,7 @@ def test_rocks_are_labelled_clutter_whose_boxes_hold_them(renderer64):
     bright = out.image > 1.3 * np.median(out.image)
     assert raised.sum() > 20 and bright.sum() > 5
     assert inside[raised].all() and inside[bright].all()
-    # written only when there is clutter, read back the same; a record from before clutter reads as none
+    # written only when there is clutter, read back the same; a record without it reads as none
     record = out.label.to_json()
     assert ChipLabel.from_json(record).clutter == clutter
     record.pop("clutter")

@@ -203,9 +203,9 @@ def test_claims_across_hosts_go_by_age(tmp_path):
 
 
 def test_a_claim_never_shows_empty(tmp_path):
-    # a holder killed between creating its claim and writing it left an empty claim, which counts
-    # as alive for a minute: a rerun skipped the chip and never assembled labels.jsonl (a flaky
-    # test_resume_after_kill_gives_identical_files). A write that fails stands in for the kill
+    # a holder killed between creating its claim and writing it would leave an empty claim, which
+    # counts as alive for a minute: a rerun would skip the chip and never assemble labels.jsonl.
+    # A write that fails stands in for the kill
     from sasmi.renderset.claims import Claims
 
     dying, rerun = Claims(tmp_path), Claims(tmp_path)
