@@ -25,7 +25,7 @@ from sasmi.errors import SasmiError
 from sasmi.gan.recipes import DEFAULT as DEFAULT_RECIPE, load_recipe
 from sasmi.images import list_images, write_text
 
-STAGES = ("phi", "renders", "floors", "sasgan", "translated", "report")
+STAGES = ("phi", "renders", "on_floors", "sasgan", "translated", "report")  # each writes RUN/<stage>
 # shares of --minutes for the two trainings; rendering, translating and the report take what they take
 SHARE = {"phi": 0.2, "sasgan": 0.7}
 MIN_CHUNK_SECONDS = 60  # less GAN time than this left in the budget is not worth a chunk
@@ -58,7 +58,7 @@ class FitPlan:
 
     @property
     def stages(self) -> tuple[str, ...]:
-        return STAGES if self.floors else tuple(s for s in STAGES if s != "floors")
+        return STAGES if self.floors else tuple(s for s in STAGES if s != "on_floors")
 
     @property
     def gan_input(self) -> Path:
@@ -178,13 +178,13 @@ def fit(plan: FitPlan, device) -> Path:
         render_set(RenderJob(preset=preset, out=out / "renders", count=plan.count, seed=plan.seed, size=plan.size))
         state.add("renders", time.monotonic() - started, done=True)
 
-    if plan.floors and "floors" not in state.done:
+    if plan.floors and "on_floors" not in state.done:
         from sasmi.realism.floors import onto_real_floors
 
-        _log("floors", f"the renders' targets on floors of {plan.floors}", plan, state.used)
+        _log("on_floors", f"the renders' targets on floors of {plan.floors}", plan, state.used)
         started = time.monotonic()
         onto_real_floors(out / "renders", plan.floors, plan.real, plan.gan_input, plan.size, plan.seed)
-        state.add("floors", time.monotonic() - started, done=True)
+        state.add("on_floors", time.monotonic() - started, done=True)
 
     if "sasgan" in state.done and stage_time("sasgan") <= MIN_CHUNK_SECONDS:
         # a rerun, perhaps with a budget raised too little to train on: say so, and what would

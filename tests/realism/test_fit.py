@@ -109,12 +109,12 @@ def test_fit_with_floors_lays_the_renders_on_them(tmp_path, capsys):
     assert main(argv) == 0
     assert len(list((out / "on_floors" / "images").glob("*.png"))) == 8
     assert (out / "on_floors" / "labels.jsonl").is_file() and (out / "on_floors" / "masks").is_dir()
-    assert json.loads((out / "fit.json").read_text())["done"] == ["phi", "renders", "floors", "sasgan", "translated",
+    assert json.loads((out / "fit.json").read_text())["done"] == ["phi", "renders", "on_floors", "sasgan", "translated",
                                                                   "report"]
     metrics = json.loads((out / "report" / "metrics.json").read_text())
     assert {"sasgan", "renders", "on_floors"} <= set(metrics["realism"])
     assert metrics["sets"]["on_floors"]["dir"] == str(out / "on_floors")
-    assert "[3/6 floors]" in capsys.readouterr().err
+    assert "[3/6 on_floors]" in capsys.readouterr().err
 
 
 def test_fit_refuses_an_empty_floors_folder_before_writing(tmp_path, capsys):
