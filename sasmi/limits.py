@@ -113,7 +113,8 @@ FLAGS: dict[str, Range] = {
     "--mask-weight": Range(0.0, 1e6, "weight of the mask contrast term; 0 turns it off"),
     "--mask-keep": Range(0.0, 2.0, "a fraction of the render's own contrast"),
     "--seeds": Range(1, 100, "each seed is one more training per regime", int),
-    "--real-per-class": Range(1, 100_000, "real training chips drawn per class; 'all' takes every one", int),
+    "--real-per-class": Range(0, 100_000, "real training chips drawn per class; 0 uses no real target, "
+                                          "'all' every chip", int),
     "--bootstrap": Range(2, 100_000, "a ± needs 2 resamples; each resample recomputes one FID", int),
     "--scenes": Range(1, 256, "scenes rendered per fit step; time grows linearly", int),
     "--columns": Range(1, 256, "tiles per row of a contact sheet", int),

@@ -1,193 +1,187 @@
-"""`sasmi atr-bench`: does synthetic data help a target-vs-seafloor classifier on real chips?
+"""`sasmi atr-bench`: does synthetic data make a target-vs-seafloor classifier better on real chips?
 
-One small fixed CNN, one fixed training budget, several seeds, three training sets:
-- real:            the real training chips (targets/ and seafloor/);
-- real+synthetic:  those plus the synthetic target chips (and synthetic seafloor, if given);
-- synthetic:       the synthetic target chips with real seafloor only.
-Each is scored on the real test chips by accuracy (threshold 0.5) and ROC AUC. With
-`real_per_class`, each seed draws that many real chips per class, the few-real-chips case
-that synthetic data is meant to help.
+For each number of real chips per class and each seed, one draw of real training chips is shared
+by every way of using the synthetic chips, so that ways are compared pair by pair:
+- real:      the drawn real targets and negatives alone (the baseline);
+- mixed:     those plus the synthetic targets (and synthetic negatives, when given);
+- alone:     the synthetic targets with the drawn real negatives (and synthetic negatives);
+- pretrain:  trained on synthetic targets and negatives first, then fine-tuned on the real draw.
+At 0 real chips per class no real target is used: `alone` trains on the synthetic targets and every
+real negative, and is paired with `real` at 40 per class (or the nearest count run).
+Each network is scored on real test chips of scene groups never trained on: accuracy, ROC AUC and
+the probability of detection at a false-alarm rate of `pfa`. Every run is kept in RUN/runs.jsonl,
+so a rerun of the same command continues where it stopped.
 """
 from __future__ import annotations
 
 import json
-import os
 import sys
-import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
+from sasmi.atr.pools import Pool, load_pool, same_sonar, split_folders, target_sonars
+from sasmi.atr.summary import paired, plot, summarise, table_markdown
 from sasmi.errors import SasmiError
-from sasmi.images import list_images, write_text
-from sasmi.preprocess import check_size, load_image, unit_to_signed
+from sasmi.eval import classifier
+from sasmi.images import write_text
+from sasmi.preprocess import check_size
 
-REGIMES = ("real", "real+synthetic", "synthetic")
+WAYS = ("real", "mixed", "alone", "pretrain")
+YARDSTICK = 40  # real chips per class that the no-real-target arm is paired with
 
 
 @dataclass(frozen=True)
 class AtrConfig:
-    size: int = 128  # chips are brought to size x size by the one preprocessing path
-    seeds: int = 5  # independent trainings per regime: the spread is what makes a difference credible
-    steps: int = 300  # fixed budget: every regime sees the same number of batches
-    batch: int = 32  # half targets, half seafloor, whatever the pool sizes
+    size: int = 64  # chips are brought to size x size by the one preprocessing path
+    seeds: int = 10  # real draws and trainings per arm; every arm uses the same draws
+    steps: int = 200  # training batches per network (and again for fine-tuning): a fixed budget
+    batch: int = 32  # half targets, half negatives, whatever the pool sizes
     lr: float = 1e-3
-    real_per_class: tuple[int | None, ...] = (None,)  # None = every real training chip
+    net: str = "small"  # sasmi.eval.classifier: "small" (a fixed yardstick) or "resnet18" (from scratch)
+    real_per_class: tuple[int | None, ...] = (0, 10, 40, None)  # None: every real training chip
+    ways: tuple[str, ...] = WAYS
+    same_sonar: bool = True  # real negatives only of the real targets' sonar (sasmi.atr.pools)
+    pfa: float = 0.05  # false-alarm rate at which the probability of detection is read
+
+    def validate(self) -> "AtrConfig":
+        check_size(self.size)
+        if self.net not in classifier.NETS:
+            raise SasmiError(f"--net {self.net}: choose one of {', '.join(classifier.NETS)}")
+        unknown = [w for w in self.ways if w not in WAYS]
+        if unknown or not self.ways:
+            raise SasmiError(f"--ways {' '.join(self.ways)}: choose from {', '.join(WAYS)}")
+        return self
 
 
-def classifier() -> torch.nn.Module:
-    """(B, 1, S, S) in [-1, 1] -> (B,) logits of 'target'. Small on purpose: a fixed yardstick, not a model."""
-    def block(c_in: int, c_out: int) -> list[torch.nn.Module]:
-        return [torch.nn.Conv2d(c_in, c_out, 3, stride=2, padding=1), torch.nn.BatchNorm2d(c_out), torch.nn.ReLU()]
-
-    return torch.nn.Sequential(*block(1, 16), *block(16, 32), *block(32, 64), *block(64, 64),
-                               torch.nn.AdaptiveAvgPool2d(1), torch.nn.Flatten(), torch.nn.Linear(64, 1),
-                               torch.nn.Flatten(0))
-
-
-def load_folder(folder: Path, size: int, what: str) -> np.ndarray:
-    """(N, S, S) in [0, 1]; unreadable files are skipped with one warning each."""
-    if not folder.is_dir():
-        raise SasmiError(f"{what} {folder}: not a folder")
-    images = []
-    for path in list_images(folder):
-        try:
-            images.append(load_image(path, size))
-        except SasmiError as e:
-            warnings.warn(f"skipping {e}", stacklevel=2)
-    if not images:
-        raise SasmiError(f"{what} {folder}: no readable image in it")
-    return np.stack(images)
+@dataclass(frozen=True)
+class Pools:
+    train_targets: Pool
+    train_negatives: Pool
+    test_targets: Pool
+    test_negatives: Pool
+    syn_targets: Pool
+    syn_negatives: Pool | None
 
 
-def _synthetic_folders(folder: Path) -> tuple[Path, Path | None]:
-    targets = folder / "targets" if (folder / "targets").is_dir() else folder
-    seafloor = folder / "seafloor" if (folder / "seafloor").is_dir() else None
-    return targets, seafloor
+def load_pools(real_train: Path, real_test: Path, synthetic: Path, synthetic_negatives: Path | None,
+               negatives: Path | None, cfg: AtrConfig) -> tuple[Pools, dict]:
+    """Every pool, with the real negatives of the targets' sonar; and a note of what was filtered."""
+    train_t, test_t = real_train / "targets", real_test / "targets"
+    train_n, test_n = negatives or real_train / "seafloor", real_test / "seafloor"
+    pools = {"train_targets": load_pool(train_t, cfg.size, "--real-train"),
+             "train_negatives": load_pool(train_n, cfg.size, "--negatives" if negatives else "--real-train"),
+             "test_targets": load_pool(test_t, cfg.size, "--real-test"),
+             "test_negatives": load_pool(test_n, cfg.size, "--real-test")}
+    wanted = target_sonars(train_t, test_t) if cfg.same_sonar else set()
+    before = {k: len(pools[k]) for k in ("train_negatives", "test_negatives")}
+    pools["train_negatives"] = same_sonar(pools["train_negatives"], train_n, wanted, "--real-train")
+    pools["test_negatives"] = same_sonar(pools["test_negatives"], test_n, wanted, "--real-test")
+    syn_t, syn_n = split_folders(synthetic)
+    syn_n = synthetic_negatives or syn_n
+    pools["syn_targets"] = load_pool(syn_t, cfg.size, "--synthetic")
+    pools["syn_negatives"] = load_pool(syn_n, cfg.size, "--synthetic-negatives") if syn_n else None
+    note = {"sonars": sorted(wanted), "negatives_before_filter": before}
+    return Pools(**pools), note
 
 
-def _augment(x: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
-    # up-down flips and small shifts only: a left-right flip would put shadows on the wrong side
-    flip = torch.rand(x.shape[0], generator=gen) < 0.5
-    x = torch.where(flip[:, None, None, None], x.flip(-2), x)
-    dy, dx = (int(v) for v in torch.randint(-4, 5, (2,), generator=gen))
-    return torch.roll(x, shifts=(dy, dx), dims=(-2, -1))
+def _draw(pool: Pool, n: int | None, rng: np.random.Generator) -> np.ndarray:
+    images = pool.images
+    return images if n is None or n >= len(images) else images[rng.choice(len(images), n, replace=False)]
 
 
-def train_classifier(targets: np.ndarray, seafloor: np.ndarray, cfg: AtrConfig, seed: int) -> torch.nn.Module:
-    """Balanced batches from two pools of (N, S, S) images in [0, 1]."""
-    gen = torch.Generator().manual_seed(seed)
-    torch.manual_seed(seed)
-    model = classifier()
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    pools = [torch.from_numpy(seafloor), torch.from_numpy(targets)]
-    half = cfg.batch // 2
-    model.train()
-    for _ in range(cfg.steps):
-        picks = [pool[torch.randint(len(pool), (half,), generator=gen)] for pool in pools]
-        x = _augment(unit_to_signed(torch.cat(picks)[:, None]), gen)  # (B, 1, S, S) in [-1, 1]
-        y = torch.cat([torch.zeros(half), torch.ones(half)])
-        loss = F.binary_cross_entropy_with_logits(model(x), y)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-    return model.eval()
+def _join(*parts: np.ndarray | None) -> np.ndarray:
+    return np.concatenate([p for p in parts if p is not None and len(p)])
 
 
-@torch.no_grad()
-def score(model: torch.nn.Module, targets: np.ndarray, seafloor: np.ndarray) -> dict:
+def train_arm(way: str, n: int | None, pools: Pools, seed: int, cfg: AtrConfig):
+    """The network of one arm: `way` at `n` real chips per class, on the real draw of `seed`."""
+    rng = np.random.default_rng(seed)  # the same real draw for every way at this n and seed
+    real_t, real_n = _draw(pools.train_targets, n, rng), _draw(pools.train_negatives, n, rng)
+    if n == 0:
+        real_n = pools.train_negatives.images  # no real target: negatives, cheap in any survey, all
+    syn_t = pools.syn_targets.images
+    syn_n = pools.syn_negatives.images if pools.syn_negatives is not None else None
+    fit = dict(steps=cfg.steps, seed=seed, net=cfg.net, batch=cfg.batch, lr=cfg.lr)
+    if way == "real":
+        return classifier.train(real_t, real_n, **fit)
+    if way == "mixed":
+        return classifier.train(_join(real_t, syn_t), _join(real_n, syn_n), **fit)
+    if way == "alone":
+        return classifier.train(syn_t, _join(real_n, syn_n), **fit)
+    pretrained = classifier.train(syn_t, syn_n if syn_n is not None else real_n, **fit)
+    return classifier.train(real_t, real_n, **fit, model=pretrained)
+
+
+def arms(cfg: AtrConfig) -> list[tuple[int | None, str]]:
+    """(real per class, way) of every arm that means something: at 0, only `alone`."""
+    return [(n, w) for n in cfg.real_per_class for w in cfg.ways if n != 0 or w == "alone"]
+
+
+def score(model, targets: np.ndarray, negatives: np.ndarray, pfa: float) -> dict:
     from sklearn.metrics import roc_auc_score
 
-    x = unit_to_signed(torch.from_numpy(np.concatenate([targets, seafloor]))[:, None])
-    p = torch.sigmoid(torch.cat([model(x[i:i + 64]) for i in range(0, len(x), 64)])).numpy()
-    y = np.concatenate([np.ones(len(targets)), np.zeros(len(seafloor))])
-    return {"accuracy": float(((p > 0.5) == y).mean()), "auc": float(roc_auc_score(y, p))}
+    p_t, p_n = classifier.predict(model, targets), classifier.predict(model, negatives)
+    threshold = np.quantile(p_n, 1.0 - pfa)  # the score that pfa of the negatives exceed
+    y = np.r_[np.ones(len(p_t)), np.zeros(len(p_n))]
+    p = np.r_[p_t, p_n]
+    return {"accuracy": float(((p > 0.5) == y).mean()), "auc": float(roc_auc_score(y, p)),
+            "pd": float((p_t > threshold).mean())}
 
 
-def _draw(pool: np.ndarray, n: int | None, rng: np.random.Generator) -> np.ndarray:
-    return pool if n is None or n >= len(pool) else pool[rng.choice(len(pool), n, replace=False)]
+def key(n: int | None) -> str:
+    return "all" if n is None else str(n)
 
 
-def _mean_std(values: list[float]) -> dict:
-    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values}
+def _done_runs(path: Path, cfg: AtrConfig, inputs: dict) -> dict[tuple[str, str, int], dict]:
+    """Runs of an earlier call with the same settings; a RUN made with others is refused."""
+    if not path.is_file():
+        return {}
+    head, *rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    same = {k: v for k, v in asdict(cfg).items() if k not in ("seeds", "real_per_class", "ways")}
+    if head.get("settings") != json.loads(json.dumps(same)) or head.get("inputs") != inputs:
+        raise SasmiError(f"--out {path.parent}: holds a bench of other settings or inputs; choose another --out")
+    return {(r["n"], r["way"], r["seed"]): r for r in rows}
 
 
-def atr_bench(real_train: str | os.PathLike, real_test: str | os.PathLike, synthetic: str | os.PathLike,
-              out: str | os.PathLike, cfg: AtrConfig = AtrConfig()) -> dict:
-    check_size(cfg.size)
+def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(),
+              synthetic_negatives=None, negatives=None) -> dict:
+    cfg.validate()
     real_train, real_test, synthetic, out = Path(real_train), Path(real_test), Path(synthetic), Path(out)
-    pools = {"train_targets": load_folder(real_train / "targets", cfg.size, "--real-train"),
-             "train_seafloor": load_folder(real_train / "seafloor", cfg.size, "--real-train"),
-             "test_targets": load_folder(real_test / "targets", cfg.size, "--real-test"),
-             "test_seafloor": load_folder(real_test / "seafloor", cfg.size, "--real-test")}
-    syn_targets, syn_seafloor = _synthetic_folders(synthetic)
-    pools["syn_targets"] = load_folder(syn_targets, cfg.size, "--synthetic")
-    pools["syn_seafloor"] = load_folder(syn_seafloor, cfg.size, "--synthetic") if syn_seafloor else pools["syn_targets"][:0]
+    synthetic_negatives = Path(synthetic_negatives) if synthetic_negatives else None
+    negatives = Path(negatives) if negatives else None
+    pools, note = load_pools(real_train, real_test, synthetic, synthetic_negatives, negatives, cfg)
+    inputs = {"real_train": str(real_train), "real_test": str(real_test), "synthetic": str(synthetic),
+              "synthetic_negatives": str(synthetic_negatives or ""), "negatives": str(negatives or "")}
+    runs_path = out / "runs.jsonl"
+    done = _done_runs(runs_path, cfg, inputs)
+    if not done:
+        out.mkdir(parents=True, exist_ok=True)
+        same = {k: v for k, v in asdict(cfg).items() if k not in ("seeds", "real_per_class", "ways")}
+        runs_path.write_text(json.dumps({"settings": same, "inputs": inputs}) + "\n")
+    todo = [(n, w, s) for n, w in arms(cfg) for s in range(cfg.seeds)]
+    for i, (n, way, seed) in enumerate(todo):
+        if (key(n), way, seed) in done:
+            continue
+        model = train_arm(way, n, pools, seed, cfg)
+        row = {"n": key(n), "way": way, "seed": seed,
+               **score(model, pools.test_targets.images, pools.test_negatives.images, cfg.pfa)}
+        with runs_path.open("a") as f:  # one whole line per run: a kill loses at most the run in hand
+            f.write(json.dumps(row) + "\n")
+        done[(row["n"], way, seed)] = row
+        print(f"atr-bench: [{i + 1}/{len(todo)}] real per class {row['n']}, {way}, seed {seed}: "
+              f"accuracy {row['accuracy']:.3f}, AUC {row['auc']:.3f}, Pd {row['pd']:.3f}", file=sys.stderr, flush=True)
 
-    results: dict = {}
-    for n in cfg.real_per_class:
-        key = "all" if n is None else str(n)
-        results[key] = {}
-        for regime in REGIMES:
-            runs = []
-            for seed in range(cfg.seeds):
-                rng = np.random.default_rng(seed)
-                real_t, real_s = _draw(pools["train_targets"], n, rng), _draw(pools["train_seafloor"], n, rng)
-                if regime == "real":
-                    t, s = real_t, real_s
-                elif regime == "real+synthetic":
-                    t, s = np.concatenate([real_t, pools["syn_targets"]]), np.concatenate([real_s, pools["syn_seafloor"]])
-                else:
-                    t, s = pools["syn_targets"], np.concatenate([real_s, pools["syn_seafloor"]])
-                model = train_classifier(t, s, cfg, seed)
-                runs.append(score(model, pools["test_targets"], pools["test_seafloor"]))
-                print(f"atr-bench: real per class {key}, {regime}, seed {seed}: accuracy {runs[-1]['accuracy']:.3f} "
-                      f"AUC {runs[-1]['auc']:.3f}", file=sys.stderr, flush=True)
-            results[key][regime] = {m: _mean_std([r[m] for r in runs]) for m in ("accuracy", "auc")}
-
-    metrics = {"config": {**asdict(cfg), "real_per_class": [n for n in cfg.real_per_class]},
-               "inputs": {"real_train": str(real_train), "real_test": str(real_test), "synthetic": str(synthetic)},
-               "counts": {k: len(v) for k, v in pools.items()}, "results": results}
+    rows = [done[(key(n), w, s)] for n, w, s in todo]
+    counts = {k: len(getattr(pools, k)) for k in ("train_targets", "train_negatives", "test_targets",
+                                                  "test_negatives", "syn_targets")}
+    counts["syn_negatives"] = len(pools.syn_negatives) if pools.syn_negatives is not None else 0
+    results = summarise(rows)
+    comparisons = paired(rows, [key(n) for n in cfg.real_per_class], YARDSTICK)
+    metrics = {"config": {**asdict(cfg), "real_per_class": [key(n) for n in cfg.real_per_class]},
+               "inputs": inputs, "counts": counts, "negatives": note, "results": results, "paired": comparisons}
     write_text(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
-    write_text(out / "table.md", table_markdown(results))
+    write_text(out / "table.md", table_markdown(results, comparisons))
     plot(results, out / "atr_bench.png")
     return metrics
-
-
-def table_markdown(results: dict) -> str:
-    lines = ["| real chips per class | trained on | accuracy | ROC AUC |", "|---|---|---:|---:|"]
-    for key, regimes in results.items():
-        for regime, m in regimes.items():
-            lines.append(f"| {key} | {regime} | {m['accuracy']['mean']:.3f} ± {m['accuracy']['std']:.3f} "
-                         f"| {m['auc']['mean']:.3f} ± {m['auc']['std']:.3f} |")
-    return "\n".join(lines) + "\n"
-
-
-def plot(results: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sasmi.images import atomic_path
-
-    keys = list(results)
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), sharey=False)
-    width = 0.8 / len(REGIMES)
-    for ax, metric in zip(axes, ("accuracy", "auc")):
-        for j, regime in enumerate(REGIMES):
-            means = [results[k][regime][metric]["mean"] for k in keys]
-            stds = [results[k][regime][metric]["std"] for k in keys]
-            ax.bar(np.arange(len(keys)) + j * width, means, width, yerr=stds, capsize=3, label=regime)
-        ax.set_xticks(np.arange(len(keys)) + width * (len(REGIMES) - 1) / 2, keys)
-        ax.set_xlabel("real chips per class")
-        ax.set_title("accuracy" if metric == "accuracy" else "ROC AUC")
-        ax.set_ylim(0.4 if metric == "auc" else 0.0, 1.0)
-    axes[0].legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)

@@ -4,7 +4,18 @@ Stored in metrics.json (`config`), so a report says how it was made.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class TwoSampleConfig:
+    folds: int = 5  # each fold is held out once; the others train the classifier
+    repeats: int = 2  # fold assignments drawn anew: the spread is over folds x repeats
+    epochs: int = 20  # passes over the training folds: enough for the small CNN to find a signature ...
+    max_steps: int = 300  # ... in at most this many batches (a large set needs fewer passes)
+    batch: int = 32  # half real, half generated
+    size: int = 64  # chips are shrunk to this: the classifier sees texture and shape, and trains in seconds
+    shown: int = 6  # chips drawn per set: those the classifier finds most synthetic
 
 
 @dataclass(frozen=True)
@@ -24,6 +35,7 @@ class EvalConfig:
     tsne_perplexity: float = 30.0  # lowered automatically for small sets (t-SNE needs perplexity < N / 3)
     thumbnails_per_set: int = 3  # images drawn on the t-SNE map per set
     batch: int = 32  # encoder batch
+    two_sample: TwoSampleConfig | None = field(default_factory=TwoSampleConfig)  # None: skip the two-sample test
     seed: int = 0  # every random choice (bootstrap, splits, subsets, shown images) derives from it
 
 

@@ -24,6 +24,7 @@ from sasmi.eval.coverage import FIGURE as COVERAGE_FIGURE, coverage_metrics
 from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
 from sasmi.eval.neighbours import copying_metrics
 from sasmi.eval.preservation import target_preservation
+from sasmi.eval.two_sample import two_sample_markdown, two_sample_metrics
 from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, coverage_markdown, realism_markdown, \
     statistics_markdown, tsne_figure
 from sasmi.labels import has_labels
@@ -114,13 +115,21 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
         copying = copying_metrics(real, sets, cfg, out_dir)
         log("t-SNE")
         tsne_section = tsne_figure(*tsne_map(real, sets, cfg), out_dir / "tsne.png")
+    two_sample = {}
+    if cfg.two_sample is not None:  # torch's own threads: outside the one-BLAS-thread block
+        log(f"two-sample test: a classifier against the real chips, {cfg.two_sample.folds} folds "
+            f"x {cfg.two_sample.repeats} per set")
+        two_sample = two_sample_metrics(real, sets, cfg.two_sample, cfg.seed, out_dir)
     result = {"config": asdict(cfg), "phi_dim": dim, "image_size": int(real.images.shape[-1]),
               "real": {"dir": str(real.folder), "n": len(real.phi)},
               "sets": {s.name: {"dir": str(s.folder), "n": len(s.phi)} for s in sets},
-              "realism": realism, "coverage": coverage, "copying": copying, "warnings": warnings}
+              "realism": realism, "two_sample": two_sample, "coverage": coverage, "copying": copying,
+              "warnings": warnings}
     notes = "".join(f"\n\n> **Warning.** {w}" for w in warnings)
     return Report(result, (
         Section("Realism in φ space", realism_markdown(realism, real) + notes),
+        *([Section("Two-sample test: can a classifier tell each set from the real chips?",
+                   two_sample_markdown(two_sample, cfg.two_sample))] if two_sample else []),
         Section("Coverage: the real chips each set misses", coverage_markdown(coverage, COVERAGE_FIGURE)),
         Section("Copying detector: nearest real images", copying_markdown(copying, sets, cfg)),
         tsne_section,

@@ -106,24 +106,95 @@ def _toy_chips(folder, n, rng, target: bool):
         write_gray(folder / f"{i}.png", image)
 
 
-def test_atr_bench_learns_a_separable_toy_and_writes_its_report(tmp_path):
-    rng = np.random.default_rng(0)
+def _toy_bench(tmp_path, rng):
     for split, n in (("train", 12), ("test", 10)):
         _toy_chips(tmp_path / split / "targets", n, rng, True)
         _toy_chips(tmp_path / split / "seafloor", n, rng, False)
     _toy_chips(tmp_path / "syn" / "targets", 12, rng, True)
+    _toy_chips(tmp_path / "syn_floor", 12, rng, False)
+    return ["atr-bench", "--real-train", str(tmp_path / "train"), "--real-test", str(tmp_path / "test"),
+            "--synthetic", str(tmp_path / "syn"), "--synthetic-negatives", str(tmp_path / "syn_floor"),
+            "--seeds", "2", "--size", "32", "--steps", "60", "--real-per-class", "0", "4", "all"]
+
+
+def test_atr_bench_learns_a_separable_toy_every_way_and_resumes(tmp_path, capsys):
+    argv = _toy_bench(tmp_path, np.random.default_rng(0))
     out = tmp_path / "bench"
-    assert main(["atr-bench", "--real-train", str(tmp_path / "train"), "--real-test", str(tmp_path / "test"),
-                 "--synthetic", str(tmp_path / "syn"), "--out", str(out), "--seeds", "2", "--size", "32",
-                 "--steps", "60", "--real-per-class", "4", "all"]) == 0
+    assert main([*argv, "--out", str(out)]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
-    assert set(metrics["results"]) == {"4", "all"}
-    for regimes in metrics["results"].values():
-        assert set(regimes) == {"real", "real+synthetic", "synthetic"}
-        for m in regimes.values():
-            assert len(m["auc"]["values"]) == 2
+    assert set(metrics["results"]) == {"0", "4", "all"}
+    assert set(metrics["results"]["0"]) == {"alone"}  # no real target: only the synthetic targets can be used
+    for n in ("4", "all"):
+        assert set(metrics["results"][n]) == {"real", "mixed", "alone", "pretrain"}
+    for ways in metrics["results"].values():
+        for m in ways.values():
+            assert len(m["auc"]["values"]) == 2 and 0.0 <= m["pd"]["mean"] <= 1.0
     assert metrics["results"]["all"]["real"]["auc"]["mean"] > 0.9  # the toy is easy: a broken loop fails here
-    assert (out / "atr_bench.png").is_file() and "real+synthetic" in (out / "table.md").read_text()
+    assert metrics["results"]["0"]["alone"]["auc"]["mean"] > 0.9  # synthetic targets alike the real ones
+    pairs = {(c["n"], c["way"]): c for c in metrics["paired"]}
+    assert pairs[("0", "alone")]["against"] == "real at 4" and pairs[("all", "pretrain")]["seeds"] == 2
+    assert metrics["counts"]["syn_negatives"] == 12
+    assert (out / "atr_bench.png").is_file() and "pretrain" in (out / "table.md").read_text()
+    lines = (out / "runs.jsonl").read_text().splitlines()
+    assert len(lines) == 1 + 2 * (1 + 4 + 4)  # the settings, then one line per arm and seed
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out)]) == 0  # a rerun trains nothing: every run is on file
+    assert "seed" not in capsys.readouterr().err and (out / "runs.jsonl").read_text().splitlines() == lines
+    assert main([*argv[:-3], "--steps", "61", "--out", str(out)]) == 2  # other settings into the same folder
+
+
+def test_negatives_of_another_sonar_are_left_out(tmp_path):
+    rng = np.random.default_rng(1)
+    argv = _toy_bench(tmp_path, rng)
+    for side, n in (("train", 12), ("test", 10)):  # targets and half the seafloor of sonar a, the rest of sonar b
+        rows = [f"targets/{i}.png,targets,a_g{i}" for i in range(n)]
+        rows += [f"seafloor/{i}.png,seafloor,{'a' if i % 2 else 'b'}_g{i}" for i in range(n)]
+        (tmp_path / side / "MANIFEST.csv").write_text("file,category,scene_group\n" + "\n".join(rows) + "\n")
+    argv = [*argv[:-3], "all", "--ways", "real"]
+    assert main([*argv, "--out", str(tmp_path / "same")]) == 0
+    counts = json.loads((tmp_path / "same" / "metrics.json").read_text())["counts"]
+    assert counts["train_negatives"] == 6 and counts["test_negatives"] == 5
+    assert main([*argv, "--any-sonar", "--out", str(tmp_path / "any")]) == 0
+    counts = json.loads((tmp_path / "any" / "metrics.json").read_text())["counts"]
+    assert counts["train_negatives"] == 12 and counts["test_negatives"] == 10
+
+
+def test_paired_differences_see_through_the_spread_between_seeds():
+    from sasmi.atr.summary import paired
+
+    rng = np.random.default_rng(0)
+    base = rng.uniform(0.6, 0.95, 10)  # seeds differ far more than the effect
+    rows = [{"n": "10", "way": "real", "seed": s, "accuracy": b, "auc": b, "pd": b} for s, b in enumerate(base)]
+    rows += [{"n": "10", "way": "mixed", "seed": s, "accuracy": b + 0.02, "auc": b + 0.02 + 0.001 * (s % 2),
+              "pd": b - 0.01} for s, b in enumerate(base)]
+    (c,) = paired(rows, ["10"], 40)
+    assert c["auc"]["mean"] == pytest.approx(0.0205) and 0 < c["auc"]["ci95"] < 0.001
+    assert c["accuracy"]["mean"] == pytest.approx(0.02) and c["pd"]["mean"] == pytest.approx(-0.01)
+    assert c["against"] == "real at 10" and c["seeds"] == 10
+
+
+def test_pd_is_read_at_the_false_alarm_rate():
+    import torch
+
+    from sasmi.atr.bench import score
+
+    class Brightness(torch.nn.Module):  # the chip's mean as its logit
+        def forward(self, x):
+            return x.mean(dim=(1, 2, 3)) * 5  # unsaturated: no ties at p = 1
+
+    levels = np.linspace(0.1, 0.9, 100, dtype=np.float32)
+    negatives = np.stack([np.full((16, 16), v, np.float32) for v in levels])
+    targets = np.stack([np.full((16, 16), v, np.float32) for v in levels[::-1] + 0.004])
+    m = score(Brightness(), targets, negatives, pfa=0.05)
+    assert m["pd"] == pytest.approx(0.05, abs=0.011)  # as bright as the negatives: Pd ≈ Pfa
+    assert score(Brightness(), np.full_like(targets[:10], 0.95), negatives, pfa=0.05)["pd"] == 1.0
+
+
+def test_the_command_line_knows_the_bench_ways():
+    from sasmi.atr.bench import WAYS
+    from sasmi.cli import atr
+
+    assert atr.WAYS == WAYS
 
 
 def test_atr_bench_bad_input_is_one_line(tmp_path, capsys):

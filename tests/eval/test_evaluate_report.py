@@ -91,11 +91,15 @@ def test_report_from_a_trained_run(data, capsys):
     # without a terminal (no progress bars) each stage still says one line
     stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("sasmi evaluate: [")]
     assert [s.split(":")[0] for s in stages] == ["φ of real", "φ of renders", "φ of shifted", "φ of floor", "realism",
-                                                 "coverage", "copying detector", "t-SNE", "target preservation", "image statistics",
+                                                 "coverage", "copying detector", "t-SNE", "two-sample test",
+                                                 "target preservation", "image statistics",
                                                  f"wrote {out}/report.md"]
 
     m = json.loads((out / "metrics.json").read_text())
     assert list(m["realism"]) == ["real→real", "renders", "shifted", "floor"]
+    assert list(m["two_sample"]) == ["renders", "shifted", "floor"] and (out / "most_synthetic.png").is_file()
+    assert all(0 <= s["auc"] <= 1 and len(s["most_synthetic"]) >= 1 for s in m["two_sample"].values())
+    assert "Two-sample test" in (out / "report.md").read_text()
     for name, row in m["realism"].items():
         assert row["fid"] >= 0 and row["fid_std"] > 0, name
         assert 0 <= row["precision"] <= 1 and 0 <= row["recall"] <= 1, name
