@@ -134,13 +134,25 @@ def key(n: int | None) -> str:
     return "all" if n is None else str(n)
 
 
+def _settings(cfg: AtrConfig) -> dict:
+    """What every run of one bench shares (more seeds, counts or ways extend it)."""
+    return json.loads(json.dumps({k: v for k, v in asdict(cfg).items() if k not in ("seeds", "real_per_class", "ways")}))
+
+
 def _done_runs(path: Path, cfg: AtrConfig, inputs: dict) -> dict[tuple[str, str, int], dict]:
     """Runs of an earlier call with the same settings; a RUN made with others is refused."""
     if not path.is_file():
         return {}
-    head, *rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    same = {k: v for k, v in asdict(cfg).items() if k not in ("seeds", "real_per_class", "ways")}
-    if head.get("settings") != json.loads(json.dumps(same)) or head.get("inputs") != inputs:
+    lines = []
+    for line in path.read_text().splitlines():
+        try:
+            lines.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue  # a line cut short by a kill: that run is trained again
+    if not lines:
+        return {}
+    head, *rows = lines
+    if head.get("settings") != _settings(cfg) or head.get("inputs") != inputs:
         raise SasmiError(f"--out {path.parent}: holds a bench of other settings or inputs; choose another --out")
     return {(r["n"], r["way"], r["seed"]): r for r in rows}
 
@@ -157,9 +169,7 @@ def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(
     runs_path = out / "runs.jsonl"
     done = _done_runs(runs_path, cfg, inputs)
     if not done:
-        out.mkdir(parents=True, exist_ok=True)
-        same = {k: v for k, v in asdict(cfg).items() if k not in ("seeds", "real_per_class", "ways")}
-        runs_path.write_text(json.dumps({"settings": same, "inputs": inputs}) + "\n")
+        write_text(runs_path, json.dumps({"settings": _settings(cfg), "inputs": inputs}) + "\n")
     todo = [(n, w, s) for n, w in arms(cfg) for s in range(cfg.seeds)]
     for i, (n, way, seed) in enumerate(todo):
         if (key(n), way, seed) in done:
