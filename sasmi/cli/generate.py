@@ -18,7 +18,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=__doc__)
     p.add_argument("preset", type=Path, help="scene preset (TOML)")
     p.add_argument("--count", type=int, default=16, help="number of scenes")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True, help="the render set to write (images are the translations)")
     p.add_argument("--seed", type=int, default=0, help="scene i depends only on (seed, i)")
     p.add_argument("--size", type=int, help="render size, a multiple of 16 (default: the size the generator "
                                             "was trained at; another size is resampled to it and back)")
