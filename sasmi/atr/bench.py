@@ -170,6 +170,9 @@ def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(
     done = _done_runs(runs_path, cfg, inputs)
     if not done:
         write_text(runs_path, json.dumps({"settings": _settings(cfg), "inputs": inputs}) + "\n")
+    elif not runs_path.read_text().endswith("\n"):
+        with runs_path.open("a") as f:
+            f.write("\n")  # end the line a kill cut short, so the next run starts a line of its own
     todo = [(n, w, s) for n, w in arms(cfg) for s in range(cfg.seeds)]
     for i, (n, way, seed) in enumerate(todo):
         if (key(n), way, seed) in done:

@@ -143,6 +143,7 @@ def test_atr_bench_learns_a_separable_toy_every_way_and_resumes(tmp_path, capsys
     (out / "runs.jsonl").write_text("\n".join(lines[:-1]) + "\n" + lines[-1][:20])  # killed mid-line
     assert main([*argv, "--out", str(out)]) == 0
     assert capsys.readouterr().err.count("seed") == 1  # the cut run alone is trained again
+    assert main([*argv, "--out", str(out)]) == 0 and "seed" not in capsys.readouterr().err  # and kept
     assert main([*argv[:-3], "--steps", "61", "--out", str(out)]) == 2  # other settings into the same folder
 
 
