@@ -95,7 +95,7 @@ def _join(*parts: np.ndarray | None) -> np.ndarray:
     return np.concatenate([p for p in parts if p is not None and len(p)])
 
 
-def train_arm(way: str, n: int | None, pools: Pools, seed: int, cfg: AtrConfig):
+def train_arm(way: str, n: int | None, pools: Pools, seed: int, cfg: AtrConfig, device="cpu"):
     """The network of one arm: `way` at `n` real chips per class, on the real draw of `seed`."""
     rng = np.random.default_rng(seed)  # the same real draw for every way at this n and seed
     real_t, real_n = _draw(pools.train_targets, n, rng), _draw(pools.train_negatives, n, rng)
@@ -103,7 +103,7 @@ def train_arm(way: str, n: int | None, pools: Pools, seed: int, cfg: AtrConfig):
         real_n = pools.train_negatives.images  # no real target: negatives, cheap in any survey, all
     syn_t = pools.syn_targets.images
     syn_n = pools.syn_negatives.images if pools.syn_negatives is not None else None
-    fit = dict(steps=cfg.steps, seed=seed, net=cfg.net, batch=cfg.batch, lr=cfg.lr)
+    fit = dict(steps=cfg.steps, seed=seed, net=cfg.net, batch=cfg.batch, lr=cfg.lr, device=device)
     if way == "real":
         return classifier.train(real_t, real_n, **fit)
     if way == "mixed":
@@ -158,7 +158,7 @@ def _done_runs(path: Path, cfg: AtrConfig, inputs: dict) -> dict[tuple[str, str,
 
 
 def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(),
-              synthetic_negatives=None, negatives=None) -> dict:
+              synthetic_negatives=None, negatives=None, device="cpu") -> dict:
     cfg.validate()
     real_train, real_test, synthetic, out = Path(real_train), Path(real_test), Path(synthetic), Path(out)
     synthetic_negatives = Path(synthetic_negatives) if synthetic_negatives else None
@@ -177,7 +177,7 @@ def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(
     for i, (n, way, seed) in enumerate(todo):
         if (key(n), way, seed) in done:
             continue
-        model = train_arm(way, n, pools, seed, cfg)
+        model = train_arm(way, n, pools, seed, cfg, device)
         row = {"n": key(n), "way": way, "seed": seed,
                **score(model, pools.test_targets.images, pools.test_negatives.images, cfg.pfa)}
         with runs_path.open("a") as f:  # one whole line per run: a kill loses at most the run in hand

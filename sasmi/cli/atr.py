@@ -5,6 +5,7 @@ import argparse
 from pathlib import Path
 
 from sasmi.cli.arguments import flag_or_all
+from sasmi.cli.common import add_device
 
 WAYS = ("real", "mixed", "alone", "pretrain")  # as sasmi.atr.bench.WAYS, which a test holds it to
 
@@ -51,6 +52,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--real-per-class", type=flag_or_all("--real-per-class"), nargs="+", default=[0, 10, 40, None],
                    metavar="N|all", help="real training chips drawn per class and seed, each a bench; 0: no real "
                                          "target (default: 0 10 40 all)")
+    add_device(a)
     a.set_defaults(run=run_atr_bench)
 
 
@@ -64,11 +66,13 @@ def run_export(args: argparse.Namespace) -> int:
 
 def run_atr_bench(args: argparse.Namespace) -> int:
     from sasmi.atr.bench import AtrConfig, atr_bench
+    from sasmi.cli.common import resolve_device
 
     cfg = AtrConfig(size=args.size, seeds=args.seeds, steps=args.steps, net=args.net, ways=tuple(args.ways),
                     real_per_class=tuple(args.real_per_class), same_sonar=args.same_sonar)
     metrics = atr_bench(args.real_train, args.real_test, args.synthetic, args.out, cfg,
-                        synthetic_negatives=args.synthetic_negatives, negatives=args.negatives)
+                        synthetic_negatives=args.synthetic_negatives, negatives=args.negatives,
+                        device=resolve_device(args.device))
     from sasmi.atr.summary import table_markdown
 
     print(table_markdown(metrics["results"], metrics["paired"]), end="")

@@ -71,7 +71,7 @@ def augment(x: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
 
 
 def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, net: str = "small",
-          batch: int = 32, lr: float = 1e-3, model: nn.Module | None = None) -> nn.Module:
+          batch: int = 32, lr: float = 1e-3, model: nn.Module | None = None, device="cpu") -> nn.Module:
     """Balanced batches (half each class, whatever the pool sizes) from two (N, S, S) pools in [0, 1].
 
     `model` continues training a network (fine-tuning after pretraining) instead of a new one.
@@ -82,14 +82,15 @@ def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, n
     if model is None:
         torch.manual_seed(seed)
         model = make(net)
+    model = model.to(device)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     pools = [torch.from_numpy(negatives), torch.from_numpy(positives)]
     half = batch // 2
-    y = torch.cat([torch.zeros(half), torch.ones(half)])
+    y = torch.cat([torch.zeros(half), torch.ones(half)]).to(device)
     model.train()
     for _ in range(steps):
         picks = [pool[torch.randint(len(pool), (half,), generator=gen)] for pool in pools]
-        x = augment(unit_to_signed(torch.cat(picks)[:, None].float()), gen)  # (B, 1, S, S) in [-1, 1]
+        x = augment(unit_to_signed(torch.cat(picks)[:, None].float()), gen).to(device)  # (B, 1, S, S) in [-1, 1]
         loss = F.binary_cross_entropy_with_logits(model(x), y)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -99,6 +100,7 @@ def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, n
 
 @torch.no_grad()
 def predict(model: nn.Module, images: np.ndarray, batch: int = 64) -> np.ndarray:
-    """(N,) probabilities of the positive class for (N, S, S) images in [0, 1]."""
+    """(N,) probabilities of the positive class for (N, S, S) images in [0, 1], on the model's device."""
+    device = next(model.parameters(), torch.zeros(())).device  # a model without weights: the CPU
     x = unit_to_signed(torch.from_numpy(images)[:, None].float())
-    return torch.sigmoid(torch.cat([model(x[i:i + batch]) for i in range(0, len(x), batch)])).numpy()
+    return torch.sigmoid(torch.cat([model(x[i:i + batch].to(device)) for i in range(0, len(x), batch)])).cpu().numpy()
