@@ -74,11 +74,11 @@ def test_a_missing_source_or_a_box_outside_its_image_writes_nothing(tmp_path, ca
 
 
 def test_the_shipped_manifest_is_the_shared_chips_own():
-    from conftest import REPO
+    from conftest import SHARED_CHIPS
     from sasmi.chips.build import COLUMNS, manifest_path, read_manifest
 
     rows = read_manifest(manifest_path("sonar-chips"))
     assert len(rows) == 334 and all(c in rows[0] for c in (*COLUMNS, "category", "scene_group"))
-    shared = REPO.parent / "shared" / "data" / "sonar-chips" / "MANIFEST.csv"
+    shared = SHARED_CHIPS / "MANIFEST.csv"
     if shared.is_file():  # beside the checkout: the two must not drift apart
         assert manifest_path("sonar-chips").read_text() == shared.read_text()
