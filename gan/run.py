@@ -32,7 +32,6 @@ from sasmi.limits import TRAIN_MAX_SIZE, setting_range
 from sasmi.preprocess import signed_to_unit
 
 
-
 def provenance() -> dict:
     """What made a run: versions, the source commit (when run from a git checkout) and the command line."""
     import subprocess

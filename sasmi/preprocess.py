@@ -15,12 +15,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sasmi.errors import SasmiError
+from sasmi.images import read_gray
 from sasmi.limits import FLAGS
 
 if TYPE_CHECKING:  # torch is imported where a tensor is made: `sasmi render` needs none (and 180 MB less)
     import torch
-from sasmi.images import read_gray
-
 
 
 def check_size(size: int, flag: str = "--size") -> int:

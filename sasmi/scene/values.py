@@ -136,7 +136,6 @@ def sample_table(cls: type, table: dict, rng: np.random.Generator, where: str, *
     return cls(**values)
 
 
-
 def read_small_file(path: Path, max_bytes: int, what: str) -> bytes:
     """The bytes of a regular file of at most `max_bytes`; checked before reading, so /dev/zero or a
     FIFO is refused instead of read for ever."""
