@@ -37,6 +37,10 @@ class Range:
     multiple: int = 1  # ints only: value % multiple == 0
 
     def allowed(self) -> str:
+        return f"{self.bounds()}; {self.why}" if self.why else self.bounds()
+
+    def bounds(self) -> str:
+        """The range alone, without its reason: "a multiple of 16, 16 to 4096"."""
         parts = []
         if self.kind is int and self.multiple > 1:
             parts.append(f"a multiple of {self.multiple}")
@@ -47,8 +51,7 @@ class Range:
             parts.append(f">= {lo}")
         elif self.hi is not None:
             parts.append(f"<= {hi}")
-        text = ", ".join(parts) or "any finite number"
-        return f"{text}; {self.why}" if self.why else text
+        return ", ".join(parts) or "any finite number"
 
     def problem(self, value: float) -> str | None:
         """None if `value` is allowed, else why not (without the name)."""
@@ -206,11 +209,7 @@ def field_range(section: str, name: str) -> Range:
 
 def markdown_table() -> str:
     """Every range as the table docs/errors.md carries."""
-    def bound(r: Range) -> str:
-        text = r.allowed()
-        return text[: -len(r.why) - 2] if r.why and text.endswith(r.why) else text
-
     rows = ["| flag, recipe key or preset field | allowed | why |", "|---|---|---|"]
     for table in (FLAGS, SETTINGS, FIELDS):
-        rows += [f"| `{name}` | {bound(r)} | {r.why} |" for name, r in table.items()]
+        rows += [f"| `{name}` | {r.bounds()} | {r.why} |" for name, r in table.items()]
     return "\n".join(rows) + "\n"

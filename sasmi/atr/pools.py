@@ -8,18 +8,16 @@ from. A chip's sonar is the MANIFEST's `sonar` column where it has one, else the
 """
 from __future__ import annotations
 
-import csv
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from sasmi.chips.build import MANIFEST, read_manifest
 from sasmi.errors import SasmiError
 from sasmi.images import list_images
 from sasmi.preprocess import load_image
-
-MANIFEST = "MANIFEST.csv"
 
 
 @dataclass(frozen=True)
@@ -63,10 +61,7 @@ def sonars(folder: Path) -> dict[str, str] | None:
     for place in (folder, folder.parent):
         path = place / MANIFEST
         if path.is_file():
-            try:
-                rows = list(csv.DictReader(path.read_text().splitlines()))
-            except (OSError, UnicodeDecodeError, csv.Error) as e:
-                raise SasmiError(f"{path}: cannot read ({e})") from None
+            rows = read_manifest(path, columns=("file",), what="")
             return {str((place / r.get("file", "")).resolve()): r.get("sonar") or r.get("scene_group", "").split("_")[0]
                     for r in rows}
     return None

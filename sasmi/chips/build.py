@@ -37,14 +37,15 @@ class Cut:
     mirrored: bool
 
 
-def read_manifest(path: Path) -> list[dict[str, str]]:
+def read_manifest(path: Path, columns: tuple[str, ...] = COLUMNS, what: str = "--manifest ") -> list[dict[str, str]]:
+    """The rows of a MANIFEST.csv; a SasmiError, prefixed by `what`, names a missing column."""
     try:
         rows = list(csv.DictReader(path.read_text().splitlines()))
     except (OSError, UnicodeDecodeError, csv.Error) as e:
-        raise SasmiError(f"--manifest {path}: cannot read ({e})") from None
-    missing = [c for c in COLUMNS if not rows or c not in rows[0]]
+        raise SasmiError(f"{what}{path}: cannot read ({e})") from None
+    missing = [c for c in columns if not rows or c not in rows[0]]
     if missing:
-        raise SasmiError(f"--manifest {path}: no {', '.join(missing)} column (needs {', '.join(COLUMNS)})")
+        raise SasmiError(f"{what}{path}: no {', '.join(missing)} column (needs {', '.join(columns)})")
     return rows
 
 
@@ -122,7 +123,7 @@ def build_chips(manifest: Path, source: Path, out: Path, size: int = 128, skip_m
         written += 1
     with atomic_path(out / MANIFEST) as tmp:
         shutil.copyfile(manifest, tmp)
-    return {"rows": len(rows), "built": len(cuts), "written": written, "absent": len(absent)}
+    return {"rows": len(rows), "built": [c.file for c in cuts], "written": written, "absent": len(absent)}
 
 
 def compare(out: Path, reference: Path, files: list[str]) -> list[str]:

@@ -29,13 +29,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sasmi.chips.build import build_chips, compare, manifest_path, read_manifest
+    from sasmi.chips.build import build_chips, compare
 
     done = build_chips(args.manifest, args.source, args.out, args.size, args.skip_missing)
-    print(f"sasmi chips build: {done['built']} of {done['rows']} chips in {args.out} ({done['written']} written now)")
+    built = done["built"]
+    print(f"sasmi chips build: {len(built)} of {done['rows']} chips in {args.out} ({done['written']} written now)")
     if args.check is None:
         return 0
-    built = [r["file"] for r in read_manifest(manifest_path(args.manifest)) if (args.out / r["file"]).is_file()]
     differ = compare(args.out, args.check, built)
     print(f"sasmi chips build: {len(built) - len(differ)} of {len(built)} chips equal {args.check}'s pixel for pixel"
           + (f"; differ: {', '.join(differ[:5])}{' ...' if len(differ) > 5 else ''}" if differ else ""))
