@@ -24,10 +24,15 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q -e '.[test]'
 	touch $@
 
+# the main job on the shipped weights, no real chip needed: 16 renders, the same scenes made realistic
+# (shipped generator, floors drawn from the shipped seabeds), their labels as COCO, one sheet of all three
 demo: setup
-	rm -rf demo  # 16 chips: redrawn whole, so a changed preset never meets an old demo's settings
-	$(BIN)/sasmi render scenes/cylinder_chip.toml --count 16 --out demo/renders
-	$(BIN)/sasmi sheet demo/renders --out demo/contact_sheet.png
+	rm -rf demo  # redrawn whole, so a changed preset never meets an old demo's settings
+	$(BIN)/sasmi render scenes/cylinder_chip.toml --count 16 --size 128 --out demo/renders
+	$(BIN)/sasmi generate scenes/cylinder_chip.toml --count 16 --out demo/chips
+	$(BIN)/sasmi export demo/chips --format coco --out demo/chips_coco.json
+	$(BIN)/sasmi sheet demo/renders demo/chips --out demo/contact_sheet.png
+	@echo "demo: render | realistic chip | its mask outline in demo/contact_sheet.png; COCO labels in demo/chips_coco.json"
 
 test: setup
 	$(BIN)/pytest -q

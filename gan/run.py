@@ -31,6 +31,10 @@ from sasmi.images import atomic_path, write_gray, write_text
 from sasmi.limits import TRAIN_MAX_SIZE, setting_range
 from sasmi.preprocess import signed_to_unit
 
+# the checkpoint layout this sasmi writes and reads; a file without the key is of format 1. Raise it
+# when a change to the layout would make an older sasmi misread a newer file
+FORMAT = 1
+
 
 def provenance() -> dict:
     """What made a run: versions, the source commit (when run from a git checkout) and the command line."""
@@ -182,19 +186,31 @@ def read_checkpoint(path: Path, kind: str) -> Saved:
             ckpt["kind"], ckpt["config"] = saved["kind"], saved["config"]
         except (OSError, ValueError, KeyError, TypeError):
             raise SasmiError(f"{path}: carries no config and its run has no readable config.json") from None
+    if ckpt.get("format", 1) != FORMAT:
+        raise SasmiError(f"{path}: checkpoint format {ckpt.get('format')!r}; this sasmi {_version()} reads format "
+                         f"{FORMAT} (written by {ckpt.get('sasmi', 'another version')}): use that version, or retrain")
     if ckpt.get("kind") != kind:
         raise SasmiError(f"{path}: is a {ckpt.get('kind')!r} run, expected a {kind!r} run")
-    extra = {k: v for k, v in ckpt.items() if k not in ("kind", "config", "step", "state")}
+    extra = {k: v for k, v in ckpt.items() if k not in ("kind", "config", "step", "state", "format", "sasmi")}
     return Saved(path, kind, ckpt["config"], int(ckpt["step"]), ckpt["state"], extra)
+
+
+def _version() -> str:
+    from sasmi import __version__
+
+    return __version__
 
 
 def read_run(run_dir: str | os.PathLike, kind: str, which: str = "last") -> Saved:
     """checkpoints/{which}.pt of a `kind` run folder, `which` being "last", "best" or a
-    checkpoint file's path. A run shorter than one checkpoint interval has no best.pt yet;
-    `which="best"` then reads last.pt."""
+    checkpoint file's path; a `run_dir` that is a file (a checkpoint, or weights that
+    `export_weights` wrote) is read as it is. A run shorter than one checkpoint interval
+    has no best.pt yet; `which="best"` then reads last.pt."""
     run_dir = Path(run_dir)
     if which not in ("last", "best"):
         return read_checkpoint(Path(which), kind)
+    if run_dir.is_file():
+        return read_checkpoint(run_dir, kind)
     if not (run_dir / "checkpoints" / "last.pt").is_file():
         raise SasmiError(f"{run_dir}: not a training run (no checkpoints/last.pt)")
     path = run_dir / "checkpoints" / f"{which}.pt"
@@ -285,7 +301,7 @@ class RunFolder:
             if isinstance(obj, torch.nn.Module) and not all(torch.isfinite(p).all() for p in obj.parameters()):
                 raise SasmiError(f"step {self.step}: {name} weights are not finite; "
                                  f"{self.out}/checkpoints/last.pt keeps the last good state (step {self.saved_step})")
-        ckpt = {"kind": self.kind, "config": asdict(self.cfg), "inputs": self.inputs, "step": self.step,
+        ckpt = {"format": FORMAT, "sasmi": _version(), "kind": self.kind, "config": asdict(self.cfg), "inputs": self.inputs, "step": self.step,
                 "best": self.best, "interval": self.interval, "torch_rng": torch.get_rng_state(),
                 "state": {name: obj.state_dict() for name, obj in self.state.items()}}
         with atomic_path(self.out / "checkpoints" / f"{which}.pt") as tmp:

@@ -11,7 +11,7 @@ LAYERS = (
     ("sasmi.errors",),
     ("sasmi.limits",),
     ("sasmi.images", "sasmi.preprocess", "sasmi.labels", "sasmi.masks"),
-    ("sasmi.scene", "sasmi.presets"),
+    ("sasmi.scene", "sasmi.presets", "sasmi.weights"),  # the data packages: presets and shipped weights
     ("sasmi.render",),
     ("sasmi.renderset",),
     ("sasmi.chips",),

@@ -16,8 +16,10 @@ def add_threads(p: argparse.ArgumentParser) -> None:
                    help="torch CPU threads (default: torch's choice; 1 when other jobs share the CPU)")
 
 
-def add_generator(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--generator", required=True, metavar="RUN", help="a `sasmi train sasgan` run folder")
+def add_generator(p: argparse.ArgumentParser, shipped: bool = False) -> None:
+    p.add_argument("--generator", required=not shipped, metavar="RUN",
+                   help="a `sasmi train sasgan` run folder, or a weights file"
+                        + (" (default: the shipped reference generator, docs/models.md)" if shipped else ""))
     p.add_argument("--checkpoint", default="last", metavar="last|best|PATH",
                    help="last: the end of training; best: the step with the lowest averaged score "
                         "(docs/gan.md); or a checkpoint file")
@@ -61,9 +63,10 @@ def check_batch(batch: int) -> int:
     return batch
 
 
-def add_translation_flags(p: argparse.ArgumentParser) -> None:
-    """What every command that runs a generator takes: which one, batch, device, threads."""
-    add_generator(p)
+def add_translation_flags(p: argparse.ArgumentParser, shipped: bool = False) -> None:
+    """What every command that runs a generator takes: which one (`shipped`: the shipped one by default),
+    batch, device, threads."""
+    add_generator(p, shipped)
     p.add_argument("--batch", type=int, default=16, help="images per generator pass")
     add_device(p)
     add_threads(p)
@@ -74,5 +77,6 @@ def generator_from(args: argparse.Namespace):
     apply_threads(args.threads)  # before torch is imported
     check_batch(args.batch)
     from sasmi.gan.generator import load_generator
+    from sasmi.weights import shipped
 
-    return load_generator(args.generator, resolve_device(args.device), args.checkpoint)
+    return load_generator(args.generator or shipped("sasgan"), resolve_device(args.device), args.checkpoint)

@@ -21,7 +21,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--real", required=True, type=Path, metavar="DIR", help="real images (the reference)")
     p.add_argument("--set", dest="sets", action="append", required=True, metavar="NAME=DIR",
                    help="an image set to evaluate, e.g. sasgan=runs/sasgan/translated; repeat for more sets")
-    p.add_argument("--phi", required=True, type=Path, metavar="RUN", help="autoencoder run (sasmi train autoencoder)")
+    p.add_argument("--phi", type=Path, metavar="RUN",
+                   help="autoencoder run (sasmi train autoencoder) or weights file (default: the shipped φ, "
+                        "docs/models.md, so that figures compare across users)")
     p.add_argument("--out", required=True, type=Path, metavar="REPORT", help="folder for the report")
     p.add_argument("--preset", type=Path, metavar="TOML", help="pose sweeps: scene preset whose first target is swept")
     p.add_argument("--generator", type=Path, metavar="RUN", help="pose sweeps: SAS GAN run that translates them")
@@ -62,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.eval import sweeps
     from sasmi.eval.cache import default_cache_dir
     from sasmi.eval.config import EvalConfig, SweepConfig
-    from sasmi.eval.features import as_encoder
+    from sasmi.eval.features import as_encoder, describe_phi
     from sasmi.eval.evaluate import StderrLog, evaluate_folders
     from sasmi.chips.stats import median_statistics
 
@@ -76,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     encoder = as_encoder(args.phi, device)
     log = StderrLog()
-    inputs = {"real": str(args.real), **{f"set {k}": str(v) for k, v in sets.items()}, "phi": str(args.phi),
+    inputs = {"real": str(args.real), **{f"set {k}": str(v) for k, v in sets.items()}, "phi": describe_phi(encoder),
               "preset": args.preset and str(args.preset), "generator": args.generator and str(args.generator),
               "seed": args.seed}
     report = rep.Report({"inputs": inputs}, (rep.Section(
@@ -93,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
     for warning in report.metrics["warnings"]:
         print(f"sasmi evaluate: warning: {warning}", file=sys.stderr)
     path = rep.write_report(args.out, report)
+    log(f"measured in φ: {describe_phi(encoder)}")
     log(f"wrote {path}")
     print(path)
     return 0

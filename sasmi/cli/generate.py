@@ -1,8 +1,9 @@
-"""`sasmi generate PRESET --generator RUN --count N --out DIR`: render and translate, streamed.
+"""`sasmi generate PRESET --count N --out DIR`: render and translate, streamed.
 
 Render scenes 0..N-1 of a preset and pass each batch through a SAS GAN generator; writes a render
 set (images/, masks/, labels.jsonl, run.json) whose images are the translations. Rerunning the same
-command resumes.
+command resumes. With no --generator, the shipped one (docs/models.md) translates renders laid on
+floors drawn from the shipped seabeds, as it was trained; --floors lays them on real floor chips.
 """
 from __future__ import annotations
 
@@ -26,10 +27,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=1, help="render processes")
     p.add_argument("--floors", metavar="DIR",
                    help="lay each render's target and shadow on a real seafloor chip first, as `sasmi fit --floors` "
-                        "did for the generator it trained (needs --real)")
+                        "did for the generator it trained (needs --real); without it, the shipped generator's renders "
+                        "take floors drawn from the shipped seabeds, another generator's keep their own")
+    p.add_argument("--seabeds", metavar="FILE",
+                   help="lay each render's target and shadow on a floor drawn from this seabeds file "
+                        "(benchmarks/reference_weights.py writes one; default with the shipped generator: the "
+                        "shipped seabeds)")
     p.add_argument("--real", metavar="DIR", help="with --floors: the real target chips the floors are matched to "
                                                   "(the --real of that `sasmi fit`)")
-    add_translation_flags(p)
+    add_translation_flags(p, shipped=True)
     p.set_defaults(run=run)
 
 
@@ -38,12 +44,15 @@ def run(args: argparse.Namespace) -> int:
 
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.errors import SasmiError
-    from sasmi.realism.floors import floor_for, floor_label, matching_floors, on_floor
+    from sasmi.realism.floors import (floor_for, floor_label, matching_floors, on_floor, seabed_floor,
+                                      seabed_floor_label)
     from sasmi.images import list_images
     from sasmi.scene.preset import load_preset
 
     if bool(args.floors) != bool(args.real):
         raise SasmiError("--floors and --real: give both (the floors are matched to the real target chips) or neither")
+    if args.floors and args.seabeds:
+        raise SasmiError("--floors and --seabeds: real floor chips or drawn seabeds, not both")
     for flag, folder in (("--floors", args.floors), ("--real", args.real)):
         if folder and not list_images(folder):
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
@@ -52,20 +61,32 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.gan.translate import translate
     job = RenderJob(preset=preset, out=args.out, count=args.count, seed=args.seed,
                     size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
-    identity = {"generator": str(Path(args.generator).resolve()),
+    identity = {"generator": str(Path(generator.checkpoint).resolve()),
                 "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
     floors = matching_floors(args.floors, args.real, job.size) if args.floors else []
     if floors:
         identity["floors"] = sorted({str(Path(f).resolve()) for f in floors})
+        floor_of, relabel = (lambda image, mask, i: floor_for(floors, args.seed, i, job.size),
+                             lambda label, i: floor_label(label, floors, args.seed, i))
+    elif args.seabeds or args.generator is None:
+        from sasmi.realism.seabeds import load_seabeds
+        from sasmi.weights import shipped
+
+        seabeds = load_seabeds(args.seabeds or shipped("seabeds"))
+        identity["seabeds_sha256"] = hashlib.sha256(seabeds.path.read_bytes()).hexdigest()
+        floor_of, relabel = (lambda image, mask, i: seabed_floor(seabeds, image, mask, args.seed, i),
+                             lambda label, i: seabed_floor_label(label, seabeds, args.seed, i))
+    else:
+        relabel = None
 
     def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
-        if floors:
-            images = np.stack([on_floor(image, mask, floor_for(floors, args.seed, i, job.size))
+        if relabel:
+            images = np.stack([on_floor(image, mask, floor_of(image, mask, i))
                                for image, mask, i in zip(images, masks, indices)])
         # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
         return translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
 
-    relabel = (lambda label, i: floor_label(label, floors, args.seed, i)) if floors else None
     render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel)
-    print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}")
+    which = f"the generator {args.generator}" if args.generator else "the shipped generator"
+    print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}, by {which}")
     return 0

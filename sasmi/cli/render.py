@@ -55,7 +55,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run_render)
 
     s = sub.add_parser("sheet", help="contact sheet of a folder of chips (with mask outlines for a render set)")
-    s.add_argument("folder", type=Path)
+    s.add_argument("folders", type=Path, nargs="+", metavar="FOLDER",
+                   help="a folder of chips; with several (renders, then their translations), each tile shows the "
+                        "same-named chip of each side by side, then the last one's mask outline")
     s.add_argument("--out", type=Path, help="PNG to write (default: FOLDER_sheet.png beside FOLDER)")
     s.add_argument("--columns", type=int, default=4, help="chips per row")
     s.add_argument("--limit", type=int, default=32, help="at most this many chips")
@@ -87,6 +89,6 @@ def run_render(args: argparse.Namespace) -> int:
 def run_sheet(args: argparse.Namespace) -> int:
     from sasmi.renderset.sheet import contact_sheet
 
-    out = contact_sheet(args.folder, args.out, args.columns, args.limit)
+    out = contact_sheet(args.folders[-1], args.out, args.columns, args.limit, before=tuple(args.folders[:-1]))
     print(f"wrote {out}")
     return 0

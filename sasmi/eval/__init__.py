@@ -13,7 +13,7 @@ One file per job, in pipeline order (clean-fid style: features, then metrics, th
 - evaluate.py      the whole evaluation as one call (what `sasmi evaluate` runs)
 
     from sasmi.eval import phi_fid
-    phi_fid("real_chips/", "translated/", phi="runs/ae")    # one number
+    phi_fid("real_chips/", "translated/")                   # one number, in the shipped φ (phi="runs/ae": your own)
 
 Definitions: docs/evaluate.md.
 """

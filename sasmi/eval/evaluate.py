@@ -48,9 +48,9 @@ class StderrLog:
         print(f"{self.prefix}: [{time.perf_counter() - self.start:6.1f} s] {message}", file=sys.stderr, flush=True)
 
 
-def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi, batch: int = 32, device="cpu") -> float:
-    """One call: φ-FID between two image folders; `phi` an autoencoder run folder or an encoder
-    (sasmi.gan.autoencoder.load_encoder)."""
+def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi=None, batch: int = 32, device="cpu") -> float:
+    """One call: φ-FID between two image folders; `phi` an autoencoder run folder or weights file, an encoder
+    (sasmi.gan.autoencoder.load_encoder), or None for the shipped φ (docs/models.md)."""
     encoder = as_encoder(phi, device)
     return metrics.fid(load_set("real", real, encoder, batch).phi, load_set("fake", fake, encoder, batch).phi)
 

@@ -47,15 +47,30 @@ def to_pixels(images: np.ndarray) -> np.ndarray:
     return np.round(np.clip(images, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def as_encoder(phi, device="cpu"):
-    """An encoder as is, or the encoder of an autoencoder run folder."""
+def as_encoder(phi=None, device="cpu"):
+    """An encoder as is, the encoder of an autoencoder run folder or weights file, or (None) the shipped φ."""
+    if phi is None:
+        from sasmi.weights import shipped
+
+        phi = shipped("phi")
     if isinstance(phi, (str, os.PathLike)):
         from sasmi.gan.autoencoder import load_encoder
 
-        if not Path(phi).is_dir():
-            raise SasmiError(f"--phi {phi}: not a folder (expected an autoencoder run)")
+        if not Path(phi).exists():
+            raise SasmiError(f"--phi {phi}: no such folder or file (expected an autoencoder run)")
         return load_encoder(phi, device=device)
     return phi
+
+
+def describe_phi(encoder) -> str:
+    """Which φ measured a figure, for reports: the shipped one by name, another by its checkpoint file,
+    each with its weights' fingerprint (sasmi.eval.cache), so two figures can be told comparable."""
+    from sasmi.eval.cache import encoder_fingerprint
+    from sasmi.weights import HERE
+
+    path = Path(encoder.checkpoint)
+    name = f"the shipped φ ({path.name})" if path.parent == HERE else str(path)
+    return f"{name}, weights {encoder_fingerprint(encoder)[:12]}"
 
 
 READ_BLOCK = 512  # images read (float32) at a time

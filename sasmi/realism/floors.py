@@ -15,6 +15,9 @@ statistics (`sasmi stats`: levels, speckle, correlation, periodicity) and the ne
 kept (FLOOR_CHOICES), and renders draw their floors from that list. Each floor is the seabed of
 one chip of that list under the speckle of another, with the slow gain swings along track that
 real swaths show (`fresh_floor`).
+
+Without real floor chips, `seabed_floor` keeps the render's own speckle and gives it a seabed
+drawn from real floors' seabed statistics (sasmi.realism.seabeds; the shipped `floors.pt`).
 """
 from __future__ import annotations
 
@@ -143,6 +146,31 @@ def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Gene
     return np.clip(seabed * np.roll(speckle, shift, axis=0), 0.0, 1.0).astype(np.float32)
 
 
+def render_speckle(render01: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(H, W): a render's floor over its seabed, the seabed blurred from floor pixels alone so that no
+    target or shadow darkens or lights the floor beside it; 1 on the target and shadow."""
+    floor = (mask == 0).astype(np.float64)
+    seabed = ndimage.gaussian_filter(render01 * floor, SEABED) / np.maximum(ndimage.gaussian_filter(floor, SEABED), 1e-6)
+    return np.where(mask == 0, render01 / (seabed + 1e-3), 1.0)
+
+
+def seabed_floor(seabeds, render01: np.ndarray, mask: np.ndarray, seed: int, index: int) -> np.ndarray:
+    """(H, W) in [0, 1]: chip `index`'s floor, the render's speckle (`render_speckle`) over a seabed drawn from
+    `seabeds` (sasmi.realism.seabeds) with gain bands, from a stream seeded by (seed, index) alone."""
+    from sasmi.realism.seabeds import draw_seabed
+
+    rng = np.random.default_rng([seed, index])
+    seabed = draw_seabed(seabeds, render01.shape, rng) * gain_bands(render01.shape[0], rng)[:, None]
+    return np.clip(seabed * render_speckle(render01.astype(np.float64), mask), 0.0, 1.0).astype(np.float32)
+
+
+def seabed_floor_label(label: ChipLabel, seabeds, seed: int, index: int) -> ChipLabel:
+    """A render's label for its composite on `seabed_floor`: all of it holds (the render's rocks stay in its
+    speckle), and the seabeds file and the stream are recorded."""
+    floor = {"seabeds": seabeds.path and str(seabeds.path), "seabed_stream": [seed, index]}
+    return replace(label, extra={**label.extra, "floor": floor})
+
+
 def _draw(choices: list[Path], seed: int, index: int) -> tuple[np.random.Generator, Path, Path, bool]:
     """Chip `index`'s floor chips (seabed, speckle), whether the seabed is flipped, and the stream that goes on."""
     rng = np.random.default_rng([seed, index])
@@ -179,24 +207,35 @@ def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targ
     Chip i (the i-th image) takes `floor_for(matching_floors(floors, targets), seed, i)`, as
     `sasmi generate --floors` does for scene i; returns the count.
     """
+    if not list_images(floors):
+        raise SasmiError(f"--floors {floors}: no image (png, jpg, tif, tiff, npy) in it")
+    choices = matching_floors(floors, targets, size)
+    return onto_floors(renders, out, size, lambda render, mask, i: floor_for(choices, seed, i, size),
+                       lambda label, i: floor_label(label, choices, seed, i))
+
+
+def onto_seabed_floors(renders: str | os.PathLike, seabeds, out: str | os.PathLike, size: int, seed: int = 0) -> int:
+    """`onto_real_floors` with `seabed_floor`s, as `sasmi generate` lays renders with the shipped generator."""
+    return onto_floors(renders, out, size, lambda render, mask, i: seabed_floor(seabeds, render, mask, seed, i),
+                       lambda label, i: seabed_floor_label(label, seabeds, seed, i))
+
+
+def onto_floors(renders: str | os.PathLike, out: str | os.PathLike, size: int, floor_of, relabel) -> int:
+    """Chip i of the render set `renders` on the floor `floor_of(render, mask, i)`, into the render set `out`."""
     from sasmi.gan.translate import carry_labels
     from sasmi.masks import read_mask
     from sasmi.preprocess import load_image
 
     renders, out = Path(renders), Path(out)
-    if not list_images(floors):
-        raise SasmiError(f"--floors {floors}: no image (png, jpg, tif, tiff, npy) in it")
     paths = list_images(renders / "images")
     if not paths or not (renders / "masks").is_dir():
         raise SasmiError(f"{renders}: not a render set (images/ and masks/)")
-    choices = matching_floors(floors, targets, size)
     for index, path in enumerate(paths):
-        floor = floor_for(choices, seed, index, size)
         render = load_image(path, size)
         mask = read_mask(renders / "masks" / f"{path.stem}.png")
         if mask.shape != render.shape:
             raise SasmiError(f"{renders / 'masks' / path.stem}.png: mask {mask.shape} against image {render.shape}")
-        write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor))
-    position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_for(..., i)
-    carry_labels(renders, out, lambda label: floor_label(label, choices, seed, position[Path(label.image).stem]))
+        write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor_of(render, mask, index)))
+    position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_of(..., i)
+    carry_labels(renders, out, lambda label: relabel(label, position[Path(label.image).stem]))
     return len(paths)

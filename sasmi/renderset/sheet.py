@@ -1,4 +1,8 @@
-"""Contact sheets: a grid of chips, each beside its mask outline (red target, blue shadow)."""
+"""Contact sheets: a grid of chips, each beside its mask outline (red target, blue shadow).
+
+Given several folders of the same scenes (a render set and its translations, say), each tile shows
+the chip of each folder side by side (matched by file name), then the last one's mask outline.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,16 +27,16 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     return edge
 
 
-def tile(image01: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
-    """(H, 2W, 3) uint8: the chip, and the chip with the mask's class boundaries drawn."""
-    gray = np.repeat(to_uint8(image01)[..., None], 3, axis=2)
+def tile(image01: np.ndarray, mask: np.ndarray | None, before: tuple[np.ndarray, ...] = ()) -> np.ndarray:
+    """(H, (k + 2) W, 3) uint8: the k chips `before`, the chip, and the chip with the mask's class boundaries drawn."""
+    grays = [np.repeat(to_uint8(image)[..., None], 3, axis=2) for image in (*before, image01)]
     if mask is None:
-        return gray
-    overlay = gray.copy()
+        return np.concatenate(grays, axis=1)
+    overlay = grays[-1].copy()
     edge = _outline(mask)
     overlay[edge & (mask == 1)] = TARGET_RGB
     overlay[edge & (mask == 2)] = SHADOW_RGB
-    return np.concatenate([gray, overlay], axis=1)
+    return np.concatenate([*grays, overlay], axis=1)
 
 
 def default_sheet_path(folder: str | Path) -> Path:
@@ -41,9 +45,10 @@ def default_sheet_path(folder: str | Path) -> Path:
     return folder.parent / f"{folder.name}_sheet.png"
 
 
-def contact_sheet(folder: str | Path, out: str | Path | None = None, columns: int = 4, limit: int = 32) -> Path:
-    """Write a PNG of the first `limit` chips of `folder`, `columns` per row; returns its path
-    (default: `default_sheet_path(folder)`)."""
+def contact_sheet(folder: str | Path, out: str | Path | None = None, columns: int = 4, limit: int = 32,
+                  before: tuple[str | Path, ...] = ()) -> Path:
+    """Write a PNG of the first `limit` chips of `folder`, `columns` per row, each after the chips of the
+    same name in the folders `before`; returns its path (default: `default_sheet_path(folder)`)."""
     if columns < 1:
         raise SasmiError(f"--columns {columns}: must be at least 1")
     if limit < 1:
@@ -56,7 +61,8 @@ def contact_sheet(folder: str | Path, out: str | Path | None = None, columns: in
     tiles = []
     for p, image in zip(paths, images):
         mask_path = folder / "masks" / (p.stem + ".png")
-        tiles.append(tile(image, read_mask(mask_path) if mask_path.is_file() else None))
+        tiles.append(tile(image, read_mask(mask_path) if mask_path.is_file() else None,
+                          tuple(_same_chip(Path(other), p, image.shape) for other in before)))
     h, w = max(t.shape[0] for t in tiles), max(t.shape[1] for t in tiles)
     rows = -(-len(tiles) // columns)
     pad = 4
@@ -68,3 +74,15 @@ def contact_sheet(folder: str | Path, out: str | Path | None = None, columns: in
     with atomic_path(out) as tmp:
         Image.fromarray(sheet).save(tmp, format="PNG")
     return out
+
+
+def _same_chip(folder: Path, chip: Path, shape: tuple[int, int]) -> np.ndarray:
+    """The chip of `folder` named as `chip` (in images/ for a render set), or a SasmiError."""
+    for candidate in (folder / "images" / chip.name, folder / chip.name):
+        if candidate.is_file():
+            image = read_gray(candidate)
+            if image.shape != shape:
+                raise SasmiError(f"{candidate}: {image.shape[1]}x{image.shape[0]} px, but {chip} is "
+                                 f"{shape[1]}x{shape[0]}: the folders hold different chips")
+            return image
+    raise SasmiError(f"{folder}: has no chip {chip.name} (each folder must hold the chips of the last one)")

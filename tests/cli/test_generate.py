@@ -136,3 +136,60 @@ def test_generate_floors_without_real_is_one_line(tmp_path, capsys):
                  "--floors", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--floors and --real" in err and not (tmp_path / "o").exists()
+
+
+def test_generate_without_a_generator_uses_the_shipped_one_on_seabed_floors(tmp_path, capsys):
+    from sasmi import weights
+
+    out = tmp_path / "gen"
+    assert main(["generate", str(REPO / "scenes" / "cylinder_chip.toml"), "--out", str(out), "--count", "2",
+                 "--spp", "2"]) == 0
+    assert "by the shipped generator" in capsys.readouterr().out
+    run = json.loads((out / "run.json").read_text())
+    assert run["generator"] == str(weights.shipped("sasgan")) and len(run["seabeds_sha256"]) == 64
+    labels = [json.loads(line) for line in (out / "labels.jsonl").read_text().splitlines()]
+    assert [label["floor"]["seabed_stream"] for label in labels] == [[0, 0], [0, 1]]
+    assert labels[0]["floor"]["seabeds"] == str(weights.shipped("seabeds"))
+    with Image.open(out / "images" / "000000.png") as image:
+        assert image.size == (128, 128)  # the shipped generator's size
+
+
+@pytest.mark.parametrize("name", ["sasgan", "seabeds"])
+def test_generate_without_the_shipped_files_is_one_line_and_writes_nothing(tmp_path, monkeypatch, capsys, name):
+    from sasmi import weights
+
+    there = tmp_path / "weights"
+    there.mkdir()
+    for other, file in weights.FILES.items():
+        if other != name:
+            (there / file).symlink_to(weights.HERE / file)
+    monkeypatch.setattr(weights, "HERE", there)
+    out = tmp_path / "gen"
+    assert main(["generate", PRESET, "--out", str(out), "--count", "1", "--spp", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{weights.FILES[name]}: the shipped {name} weights are missing" in err
+    assert not out.exists()
+
+
+def test_generate_with_a_seabeds_file_and_bad_ones(tmp_path, generator_runs, capsys):
+    from sasmi.realism.seabeds import fit_seabeds, save_seabeds
+
+    rng = np.random.default_rng(0)
+    floors = tmp_path / "floors"
+    floors.mkdir()
+    for i in range(3):
+        Image.fromarray((rng.uniform(0.1, 0.5, (32, 32)) * 255).astype(np.uint8)).save(floors / f"{i}.png")
+    seabeds = save_seabeds(fit_seabeds(floors), tmp_path / "seabeds.pt")
+    out = tmp_path / "gen"
+    base = ["generate", PRESET, "--generator", str(generator_runs[0]), "--count", "2", "--size", "32", "--spp", "2"]
+    assert main([*base, "--seabeds", str(seabeds), "--out", str(out)]) == 0
+    labels = [json.loads(line) for line in (out / "labels.jsonl").read_text().splitlines()]
+    assert labels[1]["floor"] == {"seabeds": str(seabeds), "seabed_stream": [0, 1]}
+    capsys.readouterr()
+    for extra, message in ((["--seabeds", str(tmp_path / "none.pt")], "none.pt: no such seabeds file"),
+                           (["--seabeds", str(seabeds), "--floors", str(floors), "--real", str(floors)],
+                            "--floors and --seabeds")):
+        assert main([*base, *extra, "--out", str(tmp_path / "bad")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err
+        assert not (tmp_path / "bad").exists()

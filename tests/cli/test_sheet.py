@@ -36,3 +36,26 @@ def test_zero_is_a_one_line_error(renders, capsys, flag):
     err = capsys.readouterr().err
     assert err.startswith("sasmi sheet: error: ") and err.count("\n") == 1 and flag in err and "allowed: 1" in err
     assert not (renders.parent / "renders_sheet.png").exists()
+
+
+def test_several_folders_show_each_chip_side_by_side(renders, tmp_path):
+    translated = tmp_path / "translated"
+    for i in range(5):
+        write_gray(translated / "images" / f"{i:06d}.png", np.full((16, 16), 0.5))
+        write_class_mask(translated / "masks" / f"{i:06d}.png", np.zeros((16, 16), np.uint8))
+    out = tmp_path / "sheet.png"
+    assert cli.main(["sheet", str(renders), str(translated), "--out", str(out), "--columns", "5"]) == 0
+    with Image.open(out) as image:  # 1 row of 5 tiles: render | translation | translation outlined
+        assert image.size == (5 * (48 + 4) + 4, 16 + 8)
+        sheet = np.asarray(image)
+    first = sheet[4:20, 4:52, 0]
+    np.testing.assert_array_equal(first[:, :16], np.asarray(Image.open(renders / "images" / "000000.png")))
+    assert (first[:, 16:32] == 128).all()
+
+
+def test_several_folders_must_hold_the_same_chips(renders, tmp_path, capsys):
+    other = tmp_path / "other"
+    write_gray(other / "000000.png", np.zeros((16, 16)))
+    assert cli.main(["sheet", str(other), str(renders), "--out", str(tmp_path / "s.png")]) == 2
+    assert "has no chip 000001.png" in capsys.readouterr().err
+    assert not (tmp_path / "s.png").exists()

@@ -15,6 +15,7 @@ from sasmi.gan.loop import train
 from sasmi.gan.autoencoder import AutoencoderConfig, load_encoder
 from sasmi.cli import main as cli
 from sasmi.eval import features, phi_fid, preservation, sweeps
+from sasmi.eval.cache import encoder_fingerprint
 from sasmi.errors import SasmiError
 from sasmi.images import list_images, read_gray, write_gray
 from sasmi.masks import write_class_mask
@@ -79,6 +80,19 @@ def evaluate_cli(capsys, *args) -> tuple[int, str]:
     return rc, capsys.readouterr().err
 
 
+def test_without_phi_the_shipped_one_measures_and_is_named(data, capsys):
+    from sasmi.weights import shipped
+
+    out = data.root / "shipped"
+    rc, err = evaluate_cli(capsys, "--real", data.real, "--set", f"shifted={data.shifted}", "--out", out,
+                           "--bootstrap", 5, "--no-two-sample", "--no-cache")
+    assert rc == 0, err
+    named = f"the shipped φ (phi.pt), weights {encoder_fingerprint(load_encoder(shipped('phi')))[:12]}"
+    assert f"measured in φ: {named}" in err and f"- phi: `{named}`" in (out / "report.md").read_text()
+    fid = json.loads((out / "metrics.json").read_text())["realism"]["shifted"]["fid"]
+    assert phi_fid(data.real, data.shifted) == pytest.approx(fid, rel=0.2)  # the same φ, one call
+
+
 def test_report_from_a_trained_run(data, capsys):
     out = data.root / "report"
     rc, err = evaluate_cli(capsys, "--real", data.real, "--set", f"renders={data.renders}",
@@ -90,9 +104,11 @@ def test_report_from_a_trained_run(data, capsys):
     assert "fewer than φ's 1024 dimensions" in err  # 24 real images < 1024 φ dimensions
     # without a terminal (no progress bars) each stage still says one line
     stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("sasmi evaluate: [")]
+    encoder = load_encoder(data.phi)
+    assert stages[-2] == f"measured in φ: {encoder.checkpoint}, weights {encoder_fingerprint(encoder)[:12]}"
     assert [s.split(":")[0] for s in stages] == ["φ of real", "φ of renders", "φ of shifted", "φ of floor", "realism",
                                                  "coverage", "copying detector", "t-SNE", "two-sample test",
-                                                 "target preservation", "image statistics",
+                                                 "target preservation", "image statistics", "measured in φ",
                                                  f"wrote {out}/report.md"]
 
     m = json.loads((out / "metrics.json").read_text())
