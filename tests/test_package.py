@@ -1,4 +1,5 @@
-"""sasmi installs as a package: used from another folder, the GAN code is sasmi.gan, presets and recipes ship."""
+"""sasmi installs as a package: used from another folder, the GAN code is sasmi.gan, presets, recipes and the
+reference weights ship."""
 from __future__ import annotations
 
 import subprocess
@@ -23,6 +24,9 @@ from sasmi.atr.datasets import RenderSet, RealChips
 from sasmi.eval import phi_fid
 from sasmi.gan.loop import train
 from sasmi.gan.recipes import load_recipe
+from sasmi.gan.generator import load_generator
+from sasmi.weights import shipped
+assert load_generator(shipped("sasgan")).image_size == 128 and str(shipped("phi")).startswith(TARGET)
 assert sasmi.__file__.startswith(TARGET), sasmi.__file__
 assert importlib.util.find_spec("gan") is None
 print(load_preset("cylinder_chip").path.parent.name, sorted(load_recipe("baseline")))

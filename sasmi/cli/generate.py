@@ -44,8 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.errors import SasmiError
-    from sasmi.realism.floors import (floor_for, floor_label, matching_floors, on_floor, seabed_floor,
-                                      seabed_floor_label)
+    from sasmi.realism.floors import on_floor
     from sasmi.images import list_images
     from sasmi.scene.preset import load_preset
 
@@ -61,23 +60,10 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.gan.translate import translate
     job = RenderJob(preset=preset, out=args.out, count=args.count, seed=args.seed,
                     size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
-    identity = {"generator": str(Path(generator.checkpoint).resolve()),
+    identity = {"generator": str(Path(args.generator or generator.checkpoint).resolve()),
                 "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
-    floors = matching_floors(args.floors, args.real, job.size) if args.floors else []
-    if floors:
-        identity["floors"] = sorted({str(Path(f).resolve()) for f in floors})
-        floor_of, relabel = (lambda image, mask, i: floor_for(floors, args.seed, i, job.size),
-                             lambda label, i: floor_label(label, floors, args.seed, i))
-    elif args.seabeds or args.generator is None:
-        from sasmi.realism.seabeds import load_seabeds
-        from sasmi.weights import shipped
-
-        seabeds = load_seabeds(args.seabeds or shipped("seabeds"))
-        identity["seabeds_sha256"] = hashlib.sha256(seabeds.path.read_bytes()).hexdigest()
-        floor_of, relabel = (lambda image, mask, i: seabed_floor(seabeds, image, mask, args.seed, i),
-                             lambda label, i: seabed_floor_label(label, seabeds, args.seed, i))
-    else:
-        relabel = None
+    recorded, floor_of, relabel = floor_source(args, job.size)
+    identity.update(recorded)
 
     def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
         if relabel:
@@ -90,3 +76,24 @@ def run(args: argparse.Namespace) -> int:
     which = f"the generator {args.generator}" if args.generator else "the shipped generator"
     print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}, by {which}")
     return 0
+
+
+def floor_source(args: argparse.Namespace, size: int):
+    """What each render is laid on before the generator: (what the set's identity records, floor_of(image,
+    mask, i), relabel(label, i)), or ({}, None, None) to translate the renders as they are."""
+    from sasmi.realism.floors import floor_for, floor_label, matching_floors, seabed_floor, seabed_floor_label
+
+    if args.floors:
+        floors = matching_floors(args.floors, args.real, size)
+        return ({"floors": sorted({str(Path(f).resolve()) for f in floors})},
+                lambda image, mask, i: floor_for(floors, args.seed, i, size),
+                lambda label, i: floor_label(label, floors, args.seed, i))
+    if args.seabeds or args.generator is None:  # the shipped generator learned from renders on drawn seabeds
+        from sasmi.realism.seabeds import load_seabeds
+        from sasmi.weights import shipped
+
+        seabeds = load_seabeds(args.seabeds or shipped("seabeds"))
+        return ({"seabeds_sha256": hashlib.sha256(seabeds.path.read_bytes()).hexdigest()},
+                lambda image, mask, i: seabed_floor(seabeds, image, mask, args.seed, i),
+                lambda label, i: seabed_floor_label(label, seabeds, args.seed, i))
+    return {}, None, None
