@@ -5,15 +5,12 @@ The file holds the run's config and step and the weights of WEIGHTS[kind], in th
 """
 from __future__ import annotations
 
-import io
 import os
 from pathlib import Path
 
-import torch
-
 from sasmi.errors import SasmiError
 from sasmi.gan.run import FORMAT, read_run
-from sasmi.images import atomic_path
+from sasmi.images import write_torch
 
 # what loading a trained net needs of each run kind: the rest (optimisers, critic, streams) only resumes it
 WEIGHTS = {"autoencoder": ("autoencoder",), "sasgan": ("generator_ema",), "dcgan": ("generator",)}
@@ -31,14 +28,4 @@ def export_weights(run_dir: str | os.PathLike, kind: str, out: str | os.PathLike
         raise SasmiError(f"{saved.path}: has no {', '.join(missing)} weights to export")
     weights = {"format": FORMAT, "sasmi": __version__, "kind": kind, "config": saved.config, "step": saved.step,
                "state": {name: saved.state[name] for name in WEIGHTS[kind]}, "about": about or {}}
-    return save_bytes(weights, Path(out))
-
-
-def save_bytes(data: dict, out: Path) -> Path:
-    """torch.save `data` to `out` atomically, the same bytes for the same data (a file's torch archive is
-    named after the file, and the atomic write's temporary name is random: a buffer's is always the same)."""
-    buffer = io.BytesIO()
-    torch.save(data, buffer)
-    with atomic_path(out) as tmp:
-        tmp.write_bytes(buffer.getvalue())
-    return out
+    return write_torch(out, weights)

@@ -7,10 +7,16 @@ stylegan2-ada-pytorch's loss phases): `critic_steps` × critic step, one generat
 
 One step is one generator update; every phase draws its own fresh batches from
 resumable streams, so 10 steps + resume + 10 steps equals 20 steps bit for bit.
+
+SIGTERM (a cluster's notice before it kills) and Ctrl-C stop a single-process run after the
+step in hand: last.pt is written and `sasmi.errors.Stopped` raised, so a resume continues
+exactly. A second signal acts at once, as it would without sasmi.
 """
 from __future__ import annotations
 
 import os
+import signal
+import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
@@ -19,7 +25,7 @@ import torch
 
 from sasmi.gan import distributed
 from sasmi.gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
-from sasmi.errors import SasmiError
+from sasmi.errors import SasmiError, Stopped
 
 Logs = dict[str, float]
 
@@ -91,6 +97,7 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     start = run.step
     # bf16 on CUDA when the config asks (autocast keeps losses, norms and the optimisers in float32)
     precision = torch.autocast(device.type, torch.bfloat16, enabled=cfg.amp and device.type == "cuda")
+    stop = StopSignals(enabled=world.size == 1)  # across processes each would stop at its own step
     try:
         for step in range(start + 1, cfg.steps + 1):
             with precision:
@@ -105,10 +112,35 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
             run.log(step, logs, score=logs[phases.score])
             if step % cfg.sample_every == 0 or step == cfg.steps:
                 run.write_samples()
-            if step % cfg.checkpoint_every == 0 or step == cfg.steps:
+            if step % cfg.checkpoint_every == 0 or step == cfg.steps or stop.signal:
                 run.checkpoint()
+            if stop.signal:
+                raise Stopped(stop.signal, f"stopped by {signal.Signals(stop.signal).name} after step {step}, saved in "
+                                           f"{run.out}/checkpoints/last.pt; rerun the command (sasmi train: with "
+                                           f"--resume) to continue")
     finally:
+        stop.restore()
         run.close()
     if phases.finish and run.step == cfg.steps and world.main:
         phases.finish(run.out)
     return Trained(run.out, start, run.step)
+
+
+class StopSignals:
+    """Note SIGTERM and SIGINT instead of dying, while a training runs (main thread only: Python takes
+    signals there). The first restores the previous handlers, so that a second acts as usual."""
+
+    def __init__(self, enabled: bool = True):
+        self.signal = 0
+        self.previous = {}
+        if enabled and threading.current_thread() is threading.main_thread():
+            self.previous = {s: signal.signal(s, self._note) for s in (signal.SIGTERM, signal.SIGINT)}
+
+    def _note(self, signum, frame) -> None:
+        self.signal = signum
+        self.restore()
+
+    def restore(self) -> None:
+        for s, handler in self.previous.items():
+            signal.signal(s, handler)
+        self.previous = {}

@@ -27,7 +27,7 @@ import torch
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.images import atomic_path, write_gray, write_text
+from sasmi.images import write_gray, write_text, write_torch
 from sasmi.limits import TRAIN_MAX_SIZE, setting_range
 from sasmi.preprocess import signed_to_unit
 
@@ -304,8 +304,7 @@ class RunFolder:
         ckpt = {"format": FORMAT, "sasmi": _version(), "kind": self.kind, "config": asdict(self.cfg), "inputs": self.inputs, "step": self.step,
                 "best": self.best, "interval": self.interval, "torch_rng": torch.get_rng_state(),
                 "state": {name: obj.state_dict() for name, obj in self.state.items()}}
-        with atomic_path(self.out / "checkpoints" / f"{which}.pt") as tmp:
-            torch.save(ckpt, tmp)
+        write_torch(self.out / "checkpoints" / f"{which}.pt", ckpt)
         if which == "last":
             self.saved_step = self.step
 

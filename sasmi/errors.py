@@ -16,6 +16,15 @@ class SasmiError(ValueError):
     """Bad user input: a preset field, a file, a flag. The message names the culprit."""
 
 
+class Stopped(Exception):
+    """A long command stopped by a signal at a safe point, its work saved; the message says how to
+    continue. The CLI exits 128 + the signal's number, as a shell reports a process the signal ended."""
+
+    def __init__(self, signum: int, message: str):
+        super().__init__(message)
+        self.code = 128 + signum
+
+
 def first_line(text: object, limit: int = 300) -> str:
     """The first non-empty line of `text`, shortened: library messages can be pages long."""
     lines = [line.strip() for line in str(text).splitlines() if line.strip()]

@@ -8,8 +8,10 @@ naming it; `read_folder` skips such files with one warning line each.
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
+import shutil
 import stat
 import sys
 import tempfile
@@ -52,6 +54,29 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 def write_text(path: str | os.PathLike, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def write_torch(path: str | os.PathLike, data: dict) -> Path:
+    """torch.save `data` to `path` atomically. Serialised in memory first: a full disk is then an
+    OSError of this write (torch's own file writer reports it as a RuntimeError), and the same data
+    give the same bytes (a torch archive written to a file is named after that file, here a random
+    temporary name)."""
+    import io
+
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(data, buffer)
+    try:
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(buffer.getvalue())
+    except SasmiError as e:
+        if isinstance(e.__cause__, OSError) and e.__cause__.errno == errno.ENOSPC:
+            free = shutil.disk_usage(Path(path).parent).free
+            raise SasmiError(f"{path}: no space left on the disk for its {buffer.tell() / 1e6:.1f} MB "
+                             f"({free / 1e6:.1f} MB free); nothing was written") from None
+        raise
+    return Path(path)
 
 
 def to_uint8(image01: np.ndarray) -> np.ndarray:

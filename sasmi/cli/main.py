@@ -15,7 +15,7 @@ import warnings
 
 from sasmi.cli.arguments import apply_limits
 from sasmi.cli import atr, chips, crosscheck, evaluate, fit, fit_scene, generate, render, split, stats, train, translate
-from sasmi.errors import first_line, one_line, user_error_message
+from sasmi.errors import Stopped, first_line, one_line, user_error_message
 from sasmi.limits import check_render_cost
 
 COMMANDS = (render, chips, split, stats, train, translate, generate, fit, evaluate, crosscheck, fit_scene, atr)
@@ -92,6 +92,9 @@ def _main(argv: list[str] | None) -> int:
     try:
         check_flag_combinations(args)
         return args.run(args) or 0
+    except Stopped as e:  # a training stopped by SIGTERM or Ctrl-C at a step, its checkpoint written
+        print(f"{prog}: {e}", file=sys.stderr)
+        return e.code
     except KeyboardInterrupt:
         print(f"{prog}: interrupted; finished work is kept (render/generate: rerun the same command; "
               "train: add --resume)", file=sys.stderr)

@@ -78,13 +78,13 @@ def save_seabeds(seabeds: Seabeds, out: str | os.PathLike, about: dict | None = 
     import torch
 
     from sasmi import __version__
-    from sasmi.gan.export_weights import save_bytes
     from sasmi.gan.run import FORMAT
+    from sasmi.images import write_torch
 
     data = {"format": FORMAT, "sasmi": __version__, "kind": KIND, "about": about or {},
             "state": {name: torch.from_numpy(np.ascontiguousarray(getattr(seabeds, name), dtype=np.float32))
                       for name in ("mean", "profile", "amplitude")}}
-    return save_bytes(data, Path(out))
+    return write_torch(out, data)
 
 
 def load_seabeds(path: str | os.PathLike) -> Seabeds:

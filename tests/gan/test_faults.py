@@ -1,0 +1,77 @@
+"""Faults during training: a full disk at a checkpoint is one line, exit 2, the last good checkpoint kept; SIGTERM
+stops after the step in hand with a checkpoint; either way a resume ends where an uninterrupted run ends."""
+from __future__ import annotations
+
+import errno
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from sasmi.cli import main as cli
+
+TRAIN = ["train", "autoencoder", "--size", "32", "--batch", "4", "--threads", "1"]
+
+
+def _weights(run: Path) -> dict[str, torch.Tensor]:
+    saved = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    return saved["step"], saved["state"]["autoencoder"]
+
+
+def _same(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_full_disk_at_a_checkpoint_is_one_line_and_the_rerun_ends_as_an_unbroken_run(tmp_path, real_chips,
+                                                                                         monkeypatch, capsys):
+    args = [*TRAIN, "--real", str(real_chips / "targets"), "--steps", "20", "--checkpoint-every", "10"]
+    assert cli.main([*args, "--out", str(tmp_path / "unbroken")]) == 0
+    writes, real_write = [], Path.write_bytes
+
+    def full_at_the_second_checkpoint(self, data):
+        if self.parent.name == "checkpoints":
+            writes.append(self)
+            if len(writes) == 2:  # the first is last.pt at step 0; the second best.pt at step 10
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+        return real_write(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", full_at_the_second_checkpoint)
+    run = tmp_path / "run"
+    capsys.readouterr()
+    assert cli.main([*args, "--out", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "checkpoints/best.pt: no space left on the disk for its" in err and "MB free" in err
+    assert not [p for p in (run / "checkpoints").iterdir() if p.name.startswith(".")]  # no temporary file left
+    assert _weights(run)[0] == 0  # last.pt: the last good state
+    monkeypatch.setattr(Path, "write_bytes", real_write)
+    assert cli.main([*args, "--out", str(run), "--resume"]) == 0
+    step, weights = _weights(run)
+    assert step == 20 and _same(weights, _weights(tmp_path / "unbroken")[1])
+
+
+@pytest.mark.slow
+def test_sigterm_stops_after_a_step_with_a_checkpoint_and_the_resume_is_exact(tmp_path, real_chips):
+    command = [sys.executable, "-m", "sasmi", *TRAIN, "--real", str(real_chips / "targets"), "--steps", "100000",
+               "--out", str(tmp_path / "run")]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "run" / "tb").is_dir() and time.monotonic() < deadline:  # the loop has begun
+        time.sleep(0.2)
+    time.sleep(2.0)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 128 + signal.SIGTERM, err
+    last = err.strip().splitlines()[-1].split("\r")[-1]
+    step, weights = _weights(tmp_path / "run")
+    assert last == (f"sasmi train: stopped by SIGTERM after step {step}, saved in {tmp_path / 'run'}/checkpoints/last.pt; "
+                    "rerun the command (sasmi train: with --resume) to continue")
+    assert 0 < step < 100000
+    more = ["--steps", str(step + 5)]
+    assert cli.main([*TRAIN, "--real", str(real_chips / "targets"), *more, "--out", str(tmp_path / "run"), "--resume"]) == 0
+    assert cli.main([*TRAIN, "--real", str(real_chips / "targets"), *more, "--out", str(tmp_path / "unbroken")]) == 0
+    assert _same(_weights(tmp_path / "run")[1], _weights(tmp_path / "unbroken")[1])
