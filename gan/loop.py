@@ -14,6 +14,7 @@ exactly. A second signal acts at once, as it would without sasmi.
 """
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
 import threading
@@ -91,9 +92,15 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     torch.manual_seed(cfg.seed)  # weight initialisation; every later draw has its own stream
     phases = kind.build(cfg, {k: Path(v) for k, v in inputs.items()}, device)
 
-    # ---- the run folder: a fresh one, or the state of last.pt
+    # ---- the run folder: a fresh one, or the state of last.pt; one training at a time in it
     world = distributed.world()
-    run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples, main=world.main)
+    lock = FolderLock(out, "training") if world.main else None
+    try:
+        run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples, main=world.main)
+    except BaseException:
+        if lock:
+            lock.release()
+        raise
     start = run.step
     # bf16 on CUDA when the config asks (autocast keeps losses, norms and the optimisers in float32)
     precision = torch.autocast(device.type, torch.bfloat16, enabled=cfg.amp and device.type == "cuda")
@@ -121,6 +128,8 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     finally:
         stop.restore()
         run.close()
+        if lock:
+            lock.release()
     if phases.finish and run.step == cfg.steps and world.main:
         phases.finish(run.out)
     return Trained(run.out, start, run.step)
@@ -144,3 +153,28 @@ class StopSignals:
         for s, handler in self.previous.items():
             signal.signal(s, handler)
         self.previous = {}
+
+
+class FolderLock:
+    """An exclusive lock on a run folder (RUN/.lock), or a SasmiError when another process holds it. The
+    kernel drops it when its process ends, however it ends: a killed training never leaves it behind."""
+
+    def __init__(self, folder: str | os.PathLike, what: str):
+        path = Path(folder) / ".lock"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.file = open(path, "a+")
+        try:
+            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.file.seek(0)
+            holder = self.file.read().strip() or "another process"
+            self.file.close()
+            raise SasmiError(f"{folder}: {holder} is {what} in this folder; wait for it to end, "
+                             f"or choose another --out") from None
+        self.file.seek(0)
+        self.file.truncate()
+        self.file.write(f"sasmi (pid {os.getpid()})")
+        self.file.flush()
+
+    def release(self) -> None:
+        self.file.close()  # closing drops the lock

@@ -89,7 +89,7 @@ class State:
                 raise SasmiError(f"{plan.out}: holds a `sasmi fit` run with other settings; choose another --out "
                                  f"(only --minutes may change)")
             self.seconds, self.done = saved.get("seconds", {}), saved.get("done", [])
-        elif Path(plan.out).exists() and any(Path(plan.out).iterdir()):
+        elif Path(plan.out).exists() and any(p.name != ".lock" for p in Path(plan.out).iterdir()):
             raise SasmiError(f"--out {plan.out}: exists and is not a `sasmi fit` run; choose another --out")
 
     @property
@@ -138,8 +138,6 @@ def train_for(kind, overrides: dict, out: Path, inputs: dict, device, seconds: f
 
 def fit(plan: FitPlan, device) -> Path:
     """Run every stage not yet done; returns RUN/report/report.md."""
-    from sasmi.gan.kinds.autoencoder import AUTOENCODER
-    from sasmi.gan.kinds.sasgan import SASGAN
     from sasmi.preprocess import check_size
     from sasmi.scene.preset import load_preset
 
@@ -152,7 +150,22 @@ def fit(plan: FitPlan, device) -> Path:
     for flag, folder in folders.items():
         if not list_images(folder):
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
+    from sasmi.gan.loop import FolderLock
+
     state = State(plan)
+    out = Path(plan.out)
+    lock = FolderLock(out, "running sasmi fit")  # released when the process ends: one fit at a time in RUN
+    try:
+        return _stages(plan, state, preset, gan_settings, device)
+    finally:
+        lock.release()
+
+
+def _stages(plan: FitPlan, state: State, preset, gan_settings: dict, device) -> Path:
+    """Every stage of `fit` not yet done."""
+    from sasmi.gan.kinds.autoencoder import AUTOENCODER
+    from sasmi.gan.kinds.sasgan import SASGAN
+
     out = Path(plan.out)
     budget = plan.minutes * 60
 

@@ -75,3 +75,40 @@ def test_sigterm_stops_after_a_step_with_a_checkpoint_and_the_resume_is_exact(tm
     assert cli.main([*TRAIN, "--real", str(real_chips / "targets"), *more, "--out", str(tmp_path / "run"), "--resume"]) == 0
     assert cli.main([*TRAIN, "--real", str(real_chips / "targets"), *more, "--out", str(tmp_path / "unbroken")]) == 0
     assert _same(_weights(tmp_path / "run")[1], _weights(tmp_path / "unbroken")[1])
+
+
+def test_a_second_training_in_a_busy_folder_is_refused_in_one_line(tmp_path, real_chips, capsys):
+    from sasmi.gan.loop import FolderLock
+
+    args = [*TRAIN, "--real", str(real_chips / "targets"), "--steps", "2", "--out", str(tmp_path / "run")]
+    assert cli.main(args) == 0
+    held = FolderLock(tmp_path / "run", "training")  # as another process's training would hold it
+    before = _weights(tmp_path / "run")
+    capsys.readouterr()
+    assert cli.main([*args[:-4], "--steps", "4", "--out", str(tmp_path / "run"), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"sasmi (pid {os.getpid()}) is training in this folder" in err
+    assert _same(_weights(tmp_path / "run")[1], before[1])  # untouched
+    held.release()
+    assert cli.main([*args[:-4], "--steps", "4", "--out", str(tmp_path / "run"), "--resume"]) == 0
+    assert _weights(tmp_path / "run")[0] == 4
+
+
+@pytest.mark.slow
+def test_kill_9_anywhere_loses_at_most_the_steps_since_the_last_checkpoint(tmp_path, real_chips):
+    """SIGKILL cannot be caught: what survives is the last checkpoint, written under a temporary name and renamed."""
+    args = [*TRAIN, "--real", str(real_chips / "targets"), "--checkpoint-every", "7"]
+    process = subprocess.Popen([sys.executable, "-m", "sasmi", *args, "--steps", "100000", "--out", str(tmp_path / "run")],
+                               stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "run" / "tb").is_dir() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(2.5)
+    process.kill()
+    process.wait(timeout=60)
+    step = _weights(tmp_path / "run")[0]  # a whole checkpoint, whatever the kill interrupted
+    assert step % 7 == 0 and step > 0
+    # the lock died with the process: the resume may take the folder
+    assert cli.main([*args, "--steps", str(step + 10), "--out", str(tmp_path / "run"), "--resume"]) == 0
+    assert cli.main([*args, "--steps", str(step + 10), "--out", str(tmp_path / "unbroken")]) == 0
+    assert _same(_weights(tmp_path / "run")[1], _weights(tmp_path / "unbroken")[1])
