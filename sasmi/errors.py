@@ -16,6 +16,11 @@ class SasmiError(ValueError):
     """Bad user input: a preset field, a file, a flag. The message names the culprit."""
 
 
+class Terminated(BaseException):
+    """SIGTERM outside a training (whose loop stops at a step instead): raised where the command is, as
+    Ctrl-C raises KeyboardInterrupt, so that temporary files are removed and one line said."""
+
+
 class Stopped(Exception):
     """A long command stopped by a signal at a safe point, its work saved; the message says how to
     continue. The CLI exits 128 + the signal's number, as a shell reports a process the signal ended."""

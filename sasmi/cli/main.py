@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import warnings
 
 from sasmi.cli.arguments import apply_limits
 from sasmi.cli import atr, chips, crosscheck, evaluate, fit, fit_scene, generate, render, split, stats, train, translate
-from sasmi.errors import Stopped, first_line, one_line, user_error_message
+from sasmi.errors import Stopped, Terminated, first_line, one_line, user_error_message
 from sasmi.limits import check_render_cost
 
 COMMANDS = (render, chips, split, stats, train, translate, generate, fit, evaluate, crosscheck, fit_scene, atr)
@@ -83,7 +85,33 @@ def main(argv: list[str] | None = None) -> int:
         return _main(argv)
 
 
+_TERMINATED: list[int] = []  # set by the handler: a library may wrap the exception (Dr.Jit: a RuntimeError)
+
+
+def _command_ended(prog: str, e: BaseException) -> int:
+    what = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
+    print(f"{prog}: {what}; finished work is kept (render/generate/fit: rerun the same command; "
+          "train: add --resume)", file=sys.stderr)
+    return 143 if isinstance(e, Terminated) else 130
+
+
+def _terminated(signum, frame) -> None:
+    _TERMINATED.append(signum)
+    raise Terminated()
+
+
 def _main(argv: list[str] | None) -> int:
+    in_main_thread = threading.current_thread() is threading.main_thread()  # Python takes signals there only
+    previous = signal.signal(signal.SIGTERM, _terminated) if in_main_thread else None
+    _TERMINATED.clear()
+    try:
+        return _command(argv)
+    finally:
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _command(argv: list[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad flag (2, already printed): a code, like every other outcome
@@ -95,11 +123,11 @@ def _main(argv: list[str] | None) -> int:
     except Stopped as e:  # a training stopped by SIGTERM or Ctrl-C at a step, its checkpoint written
         print(f"{prog}: {e}", file=sys.stderr)
         return e.code
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted; finished work is kept (render/generate: rerun the same command; "
-              "train: add --resume)", file=sys.stderr)
-        return 130
+    except (KeyboardInterrupt, Terminated) as e:
+        return _command_ended(prog, e)
     except Exception as e:  # the last line of defence: no traceback for anything the user can fix
+        if _TERMINATED:  # a SIGTERM that a library wrapped in its own error
+            return _command_ended(prog, Terminated())
         if os.environ.get(DEBUG) == "1":
             raise
         message = user_error_message(e)

@@ -1,0 +1,37 @@
+"""SIGTERM to a command outside a training: one line, exit 143, no traceback; the rerun completes the set that an
+uninterrupted run writes, byte for byte (trainings stop at a step instead: tests/gan/test_faults.py)."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from sasmi.images import list_images
+
+
+@pytest.mark.slow
+def test_a_render_terminated_midway_says_so_and_its_rerun_completes_the_same_set(tmp_path):
+    command = [sys.executable, "-m", "sasmi", "render", "cylinder_chip", "--count", "300", "--size", "32",
+               "--spp", "2"]
+    process = subprocess.Popen([*command, "--out", str(tmp_path / "cut")], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "cut" / "labels").is_dir() or len(list((tmp_path / "cut" / "labels").iterdir())) < 20:
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.1)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 128 + signal.SIGTERM, err
+    assert "Traceback" not in err
+    assert err.strip().split("\r")[-1].splitlines()[-1] == (
+        "sasmi render: terminated (SIGTERM); finished work is kept (render/generate/fit: rerun the same command; "
+        "train: add --resume)")
+    assert len(list((tmp_path / "cut" / "labels").iterdir())) < 300  # stopped midway
+    for out in ("cut", "whole"):
+        subprocess.run([*command, "--out", str(tmp_path / out)], check=True, capture_output=True, timeout=300)
+    cut, whole = list_images(tmp_path / "cut" / "images"), list_images(tmp_path / "whole" / "images")
+    assert [p.name for p in cut] == [p.name for p in whole] and len(cut) == 300
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(cut, whole))
+    assert (tmp_path / "cut" / "labels.jsonl").read_bytes() == (tmp_path / "whole" / "labels.jsonl").read_bytes()
