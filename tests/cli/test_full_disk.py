@@ -1,0 +1,88 @@
+"""A full disk in the middle of `generate`, `export` and `evaluate`: one line, exit 2, no file half-written under its
+final name, and the rerun on a disk with room ends as an uninterrupted run. Every file sasmi writes is committed by
+one rename (sasmi.images.atomic_path); the disk fills at the k-th of them."""
+from __future__ import annotations
+
+import errno
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from sasmi.cli.main import main
+
+PRESET = "cylinder_chip"
+
+
+def _disk_full_at(monkeypatch, under: Path, k: int) -> list[str]:
+    """Make the k-th rename into `under` fail as a full disk does; returns the renames seen."""
+    seen, real_replace = [], os.replace
+
+    def replace(src, dst, *args, **kwargs):
+        if str(dst).startswith(str(under)):
+            seen.append(str(dst))
+            if len(seen) == k:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_replace(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", replace)
+    return seen
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _one_line_no_space(capsys) -> str:
+    """The error is one line, the last (progress lines may come before it), with no traceback."""
+    err = capsys.readouterr().err
+    last = err.strip().split("\r")[-1].splitlines()[-1]
+    assert "error: " in last and "No space left on device" in last and "Traceback" not in err, err
+    assert err.count("error") == 1, err
+    return last
+
+
+def _no_temporary_files(folder: Path) -> None:
+    assert not [p for p in folder.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]
+
+
+@pytest.mark.slow
+def test_generate_and_export_on_a_full_disk(tmp_path, monkeypatch, capsys):
+    args = ["generate", PRESET, "--count", "6", "--spp", "2", "--batch", "2"]
+    assert main([*args, "--out", str(tmp_path / "whole")]) == 0
+    assert main(["export", str(tmp_path / "whole"), "--format", "coco", "--out", str(tmp_path / "whole.json")]) == 0
+    capsys.readouterr()
+
+    out = tmp_path / "cut"
+    seen = _disk_full_at(monkeypatch, out, 9)  # in the middle of the chips
+    assert main([*args, "--out", str(out)]) == 2
+    _one_line_no_space(capsys)
+    _no_temporary_files(out)
+    assert len(seen) == 9
+    monkeypatch.undo()
+    assert main([*args, "--out", str(out)]) == 0  # the rerun completes the set
+    assert _files(out) == _files(tmp_path / "whole")
+
+    _disk_full_at(monkeypatch, tmp_path / "cut.json", 1)
+    capsys.readouterr()
+    assert main(["export", str(out), "--format", "coco", "--out", str(tmp_path / "cut.json")]) == 2
+    _one_line_no_space(capsys)
+    assert not (tmp_path / "cut.json").exists()
+    monkeypatch.undo()
+    assert main(["export", str(out), "--format", "coco", "--out", str(tmp_path / "cut.json")]) == 0
+    cut, whole = (json.loads((tmp_path / name).read_text()) for name in ("cut.json", "whole.json"))
+    assert {k: v for k, v in cut.items() if k != "info"} == {k: v for k, v in whole.items() if k != "info"}
+
+
+@pytest.mark.slow
+def test_evaluate_on_a_full_disk(tmp_path, monkeypatch, capsys, real_chips):
+    args = ["evaluate", "--real", str(real_chips / "targets"), "--set", f"floors={real_chips / 'seafloor'}",
+            "--bootstrap", "5", "--no-two-sample", "--no-cache"]
+    _disk_full_at(monkeypatch, tmp_path / "report", 2)
+    assert main([*args, "--out", str(tmp_path / "report")]) == 2
+    _one_line_no_space(capsys)
+    _no_temporary_files(tmp_path / "report")
+    monkeypatch.undo()
+    assert main([*args, "--out", str(tmp_path / "report")]) == 0
+    assert (tmp_path / "report" / "report.md").is_file() and (tmp_path / "report" / "metrics.json").is_file()
