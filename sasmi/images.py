@@ -56,6 +56,18 @@ def write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text)
 
 
+def check_room(folder: str | os.PathLike, need: int, what: str) -> None:
+    """A SasmiError, before any work, when the disk of `folder` (or of its nearest existing parent) clearly
+    has less free space than the `need` bytes that `what` will write."""
+    place = Path(folder).absolute()
+    while not place.exists() and place != place.parent:
+        place = place.parent
+    free = shutil.disk_usage(place).free
+    if need > free:
+        raise SasmiError(f"{folder}: {what} need about {need / 1e6:,.0f} MB and its disk has {free / 1e6:,.0f} MB "
+                         f"free; free some space or choose another --out")
+
+
 def write_torch(path: str | os.PathLike, data: dict) -> Path:
     """torch.save `data` to `path` atomically. Serialised in memory first: a full disk is then an
     OSError of this write (torch's own file writer reports it as a RuntimeError), and the same data

@@ -31,7 +31,7 @@ from tqdm import tqdm
 from sasmi import __version__
 from sasmi.renderset.claims import Claims
 from sasmi.errors import SasmiError
-from sasmi.images import FORMATS, write_gray, write_text
+from sasmi.images import FORMATS, check_room, write_gray, write_text
 from sasmi.labels import ChipLabel, categories_of, read_labels
 from sasmi.limits import FLAGS
 from sasmi.masks import write_class_mask, write_instance_mask
@@ -93,6 +93,11 @@ def _name(index: int) -> str:
 
 def image_path(out: Path, index: int, image_format: str) -> Path:
     return out / "images" / (_name(index) + FORMATS[image_format])
+
+
+def chip_bytes(size: int, image_format: str) -> int:
+    """A generous estimate of one chip's files: the image (speckle barely compresses), three masks, the label."""
+    return size * size * {"tiff16": 2, "npy": 4}.get(image_format, 1) + 3 * size * size // 4 + 4096
 
 
 def is_complete(out: Path, index: int, image_format: str) -> bool:
@@ -244,6 +249,9 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     """
     if relabel is not None and transform is None:
         raise ValueError("render_set: relabel goes with a transform (untransformed chips are written by the workers)")
+    indices = job.indices()
+    todo = [i for i in indices if not is_complete(job.out, i, job.image_format)]
+    check_room(job.out, len(todo) * chip_bytes(job.size, job.image_format), f"{len(todo)} chips")
     job = prepare(job, identity)
     claims = Claims(job.out / "claims")
     temps = _temp_files(job.out)
@@ -258,8 +266,6 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
             path.unlink(missing_ok=True)
         return True
 
-    indices = job.indices()
-    todo = [i for i in indices if not is_complete(job.out, i, job.image_format)]
     beside = transform is not None and job.workers > 1  # the driver's generator runs beside local workers
     if beside:
         from sasmi.renderset.threads import share_torch_threads

@@ -86,3 +86,16 @@ def test_evaluate_on_a_full_disk(tmp_path, monkeypatch, capsys, real_chips):
     monkeypatch.undo()
     assert main([*args, "--out", str(tmp_path / "report")]) == 0
     assert (tmp_path / "report" / "report.md").is_file() and (tmp_path / "report" / "metrics.json").is_file()
+
+
+def test_a_render_that_clearly_will_not_fit_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    import shutil
+
+    real_usage = shutil.disk_usage
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: real_usage(path)._replace(free=5_000_000))
+    out = tmp_path / "renders"
+    assert main(["render", PRESET, "--count", "1000", "--size", "128", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{out}: 1000 chips need about 33 MB and its disk has 5 MB free" in err
+    assert not out.exists()
+    assert main(["render", PRESET, "--count", "2", "--size", "32", "--spp", "2", "--out", str(out)]) == 0  # small: fits
