@@ -95,6 +95,9 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     # ---- the run folder: a fresh one, or the state of last.pt; one training at a time in it
     world = distributed.world()
     lock = FolderLock(out, "training") if world.main else None
+    if lock:  # a checkpoint write that a kill -9 cut short leaves its temporary file; none is ever read
+        for stale in (Path(out) / "checkpoints").glob(".*.tmp.pt"):
+            stale.unlink(missing_ok=True)
     try:
         run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples, main=world.main)
     except BaseException:
