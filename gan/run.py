@@ -301,8 +301,8 @@ class RunFolder:
             if isinstance(obj, torch.nn.Module) and not all(torch.isfinite(p).all() for p in obj.parameters()):
                 raise SasmiError(f"step {self.step}: {name} weights are not finite; "
                                  f"{self.out}/checkpoints/last.pt keeps the last good state (step {self.saved_step})")
-        ckpt = {"format": FORMAT, "sasmi": _version(), "kind": self.kind, "config": asdict(self.cfg), "inputs": self.inputs, "step": self.step,
-                "best": self.best, "interval": self.interval, "torch_rng": torch.get_rng_state(),
+        ckpt = {"format": FORMAT, "sasmi": _version(), "kind": self.kind, "config": asdict(self.cfg),
+                "inputs": self.inputs, "step": self.step, "best": self.best, "interval": self.interval, "torch_rng": torch.get_rng_state(),
                 "state": {name: obj.state_dict() for name, obj in self.state.items()}}
         write_torch(self.out / "checkpoints" / f"{which}.pt", ckpt)
         if which == "last":

@@ -69,7 +69,7 @@ def describe_phi(encoder) -> str:
     from sasmi.weights import HERE
 
     path = Path(encoder.checkpoint)
-    name = f"the shipped φ ({path.name})" if path.parent == HERE else str(path)
+    name = f"the shipped φ ({path.name})" if path.resolve().parent == HERE else str(path)
     return f"{name}, weights {encoder_fingerprint(encoder)[:12]}"
 
 

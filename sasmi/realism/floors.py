@@ -17,7 +17,7 @@ one chip of that list under the speckle of another, with the slow gain swings al
 real swaths show (`fresh_floor`).
 
 Without real floor chips, `seabed_floor` keeps the render's own speckle and gives it a seabed
-drawn from real floors' seabed statistics (sasmi.realism.seabeds; the shipped `floors.pt`).
+drawn from real floors' seabed statistics (sasmi.realism.seabeds; the shipped `seabeds.pt`).
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ ripples and range profile. Seen at COARSE px, the log of a seabed is its mean, i
 scale and in each direction. Drawing that field's phases afresh makes a new seabed of the same
 character that is no real chip (phase randomisation, Theiler et al. 1992). A seabeds file keeps,
 for each seafloor chip, the mean, the profile and the amplitudes: statistics, no image. The
-shipped one (sasmi/weights/floors.pt, docs/models.md) holds those of the seafloor chips of the
+shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds those of the seafloor chips of the
 shared target chips' sonar, so that `sasmi generate` lays renders on real-like floors anywhere.
 """
 from __future__ import annotations
