@@ -1,7 +1,7 @@
 """Retrain the reference weights sasmi ships (sasmi/weights/, model card docs/models.md), bit for bit.
 
     python benchmarks/reference_weights.py --chips ../shared/data/sonar-chips --out runs/reference --check
-    python benchmarks/reference_weights.py ... --install    # then copy the three files into sasmi/weights/
+    python benchmarks/reference_weights.py ... --install    # and copy the three files into sasmi/weights/
 
 Every stage trains a fixed number of steps from a fixed seed (not a time budget), on 2 torch
 threads, so the same torch on the same kind of CPU writes the same bytes: --check compares each
