@@ -99,6 +99,8 @@ FLAGS: dict[str, Range] = {
     "--per-shard": Range(1, 100_000, "samples per tar shard; a shard is rendered whole before it is written", int),
     "--minutes": Range(0.01, 7 * 24 * 60, "a fraction of a minute is a smoke test in which every stage still runs; "
                                           "a week is the most any plan needs"),
+    "--trials": Range(1, 1_000_000, "search trials; each renders --chips scenes", int),
+    "--chips": Range(8, 4096, "renders scored per trial; medians of fewer than 8 move with every draw", int),
     "--batch": Range(1, 1024, "one pass holds batch x size² activations per layer", int),
     "--steps": Range(1, 10_000_000, "training and fitting steps; 10^7 is weeks of GPU time", int),
     "--lr": Range(1e-8, 1.0, "Adam learning rates above 1 diverge at once; below 1e-8 float32 weights do not move"),

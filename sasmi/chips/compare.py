@@ -34,6 +34,20 @@ class Tolerance:
             return abs(other - reference) <= self.high
         return other <= self.high
 
+    def distance(self, reference: float, other: float) -> float:
+        """How many tolerances `other` lies from `reference`: <= 1 where `holds`, inf where either is
+        missing. A ratio counts on a log scale: half and double the reference are equally far."""
+        if not (math.isfinite(reference) and math.isfinite(other)):
+            return math.inf
+        if self.kind == "ratio":
+            if reference <= 0 or other <= 0:
+                return math.inf
+            r = math.log(other / reference)
+            return r / math.log(self.high) if r >= 0 else r / math.log(self.low)
+        if self.kind == "diff":
+            return abs(other - reference) / self.high
+        return max(other, 0.0) / self.high
+
     def describe(self) -> str:
         return {"ratio": f"{self.low:g}-{self.high:g}x", "diff": f"±{self.high:g}", "max": f"<= {self.high:g}"}[self.kind]
 

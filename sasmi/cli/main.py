@@ -16,11 +16,11 @@ import threading
 import warnings
 
 from sasmi.cli.arguments import apply_limits
-from sasmi.cli import atr, chips, crosscheck, evaluate, fit, fit_scene, generate, render, split, stats, train, translate
+from sasmi.cli import atr, calibrate, chips, crosscheck, evaluate, fit, fit_scene, generate, render, split, stats, train, translate
 from sasmi.errors import Stopped, Terminated, first_line, one_line, user_error_message
 from sasmi.limits import check_render_cost
 
-COMMANDS = (render, chips, split, stats, train, translate, generate, fit, evaluate, crosscheck, fit_scene, atr)
+COMMANDS = (render, chips, split, stats, train, translate, generate, fit, evaluate, crosscheck, fit_scene, calibrate, atr)
 
 DEBUG = "SASMI_DEBUG"  # set to 1 to see the traceback of any error
 

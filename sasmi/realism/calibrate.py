@@ -1,0 +1,246 @@
+"""`sasmi calibrate`: a preset fitted to a folder of unlabelled real chips, as a distribution.
+
+Each trial sets the knobs (sasmi/realism/preset_space.py), renders the same `chips` scenes of the
+candidate preset (the same random draws in every trial, so two trials differ by their knobs alone) and
+scores them against the real chips:
+
+    objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
+
+d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1
+passes; the 4 target sizes count only where most real chips show a target), and the φ-FID ratio is the
+renders' FID to the real chips in the shipped φ over that of as many real chips to the rest (1: as close as real chips are to each other). The first term pins what the
+statistics measure (shadow and highlight sizes in px, gray levels, speckle), the second the whole
+distribution of looks. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
+rerun continues it, and --minutes counts the search time of all runs together.
+"""
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from sasmi.chips.compare import TOLERANCES
+from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
+from sasmi.errors import SasmiError, Stopped
+from sasmi.images import write_text
+from sasmi.preprocess import check_size
+from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, knob, start_values
+from sasmi.scene.preset import Preset, load_preset
+
+SAMPLERS = ("cmaes", "tpe")
+FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
+FAILED = 1e3  # objective of a knob setting that makes no valid preset
+
+
+@dataclass(frozen=True)
+class CalibrateConfig:
+    params: tuple[str, ...] = DEFAULT_KNOBS  # knobs searched; every other field keeps the start's value
+    minutes: float = 30.0  # search time of all runs of the study together
+    trials: int | None = None  # or stop after this many trials, whichever comes first
+    chips: int = 32  # scenes rendered per trial; their medians and φ are scored
+    size: int = 128  # render size and statistics size (the statistics' thresholds are stated at 128 px)
+    spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
+    sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
+    phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
+    final_chips: int = 200  # renders of the start and the calibrated preset in the report, other scenes
+    seed: int = 0  # preset draws of the trials; the report's renders use seed + 1
+
+    def validate(self) -> "CalibrateConfig":
+        check_knobs(self.params)
+        check_size(self.size, "--size")
+        if self.sampler not in SAMPLERS:
+            raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
+        if self.chips < 8 or self.final_chips < 8:
+            raise SasmiError(f"--chips: {min(self.chips, self.final_chips)} (allowed: >= 8; medians of fewer "
+                             "renders move with every draw)")
+        return self
+
+    def identity(self) -> dict:
+        """What a rerun must share to continue the study: everything but the budget."""
+        return {k: v for k, v in asdict(self).items() if k not in ("minutes", "trials")}
+
+
+@dataclass(frozen=True)
+class RealChips:
+    folder: Path
+    medians: dict[str, float]
+    checked: tuple[str, ...]  # the statistics matched: the target ones only where most chips show a target
+    phi: np.ndarray  # (N, D) float64
+    phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
+    images: np.ndarray  # (N, S, S) float32 in [0, 1]
+
+
+def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 16) -> RealChips:
+    from sasmi.eval.features import image_paths, load_images, phi_features
+    from sasmi.eval.metrics import fid
+
+    stats = chip_statistics(folder, cfg.size)
+    images = load_images(image_paths(folder), cfg.size)
+    if len(images) < cfg.chips + 8:
+        raise SasmiError(f"--real {folder}: {len(images)} chips; calibrating with --chips {cfg.chips} needs at "
+                         f"least {cfg.chips + 8}")
+    phi = phi_features(encoder, images)
+    rng = np.random.default_rng([cfg.seed, 7])
+    reference = []
+    for _ in range(draws):
+        order = rng.permutation(len(phi))
+        reference.append(fid(phi[order[:cfg.chips]], phi[order[cfg.chips:]]))
+    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
+    checked = tuple(k for k in TOLERANCES if targets or k not in MASK_STATISTICS)
+    return RealChips(Path(folder), {k: s["median"] for k, s in stats["summary"].items()}, checked, phi,
+                     float(np.mean(reference)), images)
+
+
+def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
+    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are."""
+    from sasmi.render.mitsuba import render
+
+    images = [render(preset.sample(seed, i), cfg.size, cfg.spp).image for i in range(count)]
+    return (np.round(np.clip(np.stack(images), 0, 1) * 255) / 255).astype(np.float32)
+
+
+def medians(images: np.ndarray) -> dict[str, float]:
+    rows = [image_statistics(im) for im in images]
+    out = {}
+    for k in STATISTICS:
+        v = np.array([r[k] for r in rows])
+        out[k] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else math.nan
+    return out
+
+
+def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float) -> dict:
+    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio."""
+    from sasmi.eval.features import phi_features
+    from sasmi.eval.metrics import fid
+
+    ours = medians(images)
+    distances = {k: TOLERANCES[k].distance(real.medians[k], ours[k]) for k in real.checked}
+    ratio = fid(phi_features(encoder, images), real.phi) / real.phi_reference
+    stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
+    return {"objective": stats_term + phi_weight * ratio, "statistics": stats_term, "phi_ratio": ratio,
+            "passed": sum(d <= 1 for d in distances.values()), "distances": distances, "medians": ours}
+
+
+def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
+    """`score` with the φ-FID ratio of `sasmi evaluate` (matched sizes, 200 real splits): the report's figure."""
+    from sasmi.eval.features import phi_features
+    from sasmi.eval.metrics import fid_ratio_matched
+
+    s = score(images, real, encoder, cfg.phi_weight)
+    ratio = fid_ratio_matched(phi_features(encoder, images), real.phi, 200, cfg.seed)
+    return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std}
+
+
+def _study(out: Path, cfg: CalibrateConfig, x0: dict[str, float]):
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = optuna.storages.RDBStorage(f"sqlite:///{(out / 'study.db').resolve()}")
+    if cfg.sampler == "cmaes":
+        with warnings.catch_warnings():  # x0 (the start preset as CMA-ES's mean) is deprecated from Optuna 4.9 on,
+            warnings.simplefilter("ignore", FutureWarning)  # to go in 6.0 (pyproject pins optuna < 6)
+            sampler = optuna.samplers.CmaEsSampler(x0=x0, seed=cfg.seed, warn_independent_sampling=False)
+    else:
+        sampler = optuna.samplers.TPESampler(seed=cfg.seed, multivariate=True)
+    study = optuna.create_study(study_name="calibrate", storage=storage, sampler=sampler, direction="minimize",
+                                load_if_exists=True)
+    for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
+        storage.set_trial_state_values(t._trial_id, optuna.trial.TrialState.FAIL)  # a killed run's trial
+    if not study.trials:
+        study.enqueue_trial(x0)  # trial 0 is the start preset: the report's "before"
+    return study
+
+
+def _suggest(trial, names: tuple[str, ...]) -> dict[str, float]:
+    values = {}
+    for name in names:
+        k = knob(name)
+        low = max(k.low, 1e-6) if k.log else k.low
+        values[name] = trial.suggest_float(name, low, k.high, log=k.log)
+    return values
+
+
+def _check_record(out: Path, record: dict) -> None:
+    path = out / "calibrate.json"
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, ValueError):
+            raise SasmiError(f"{path}: unreadable; remove {out} or choose another --out") from None
+        if old.get("identity") != record["identity"]:
+            changed = sorted(k for k in record["identity"] if old.get("identity", {}).get(k) != record["identity"][k])
+            raise SasmiError(f"{out}: holds a calibration with other settings ({', '.join(changed)}); rerun with "
+                             "its settings to continue it, or choose another --out")
+    write_text(path, json.dumps(record, indent=2) + "\n")
+
+
+def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, out: str | Path,
+              phi=None, progress: bool = True) -> Path:
+    """Search the knobs for `cfg.minutes` (all runs together), then write RUN/preset.toml and RUN/report.md."""
+    from tqdm import tqdm
+
+    from sasmi.eval.features import as_encoder, describe_phi
+    from sasmi.gan.loop import StopSignals
+    from sasmi.images import FolderLock
+    from sasmi.realism.calibration_report import searched_seconds, write_report
+
+    cfg = cfg.validate()
+    out = Path(out)
+    preset = load_preset(start)
+    encoder = as_encoder(phi)
+    real = real_chips(real_folder, cfg, encoder)  # read before anything is written: a bad folder leaves no RUN
+    lock = FolderLock(out, "running sasmi calibrate")
+    try:
+        record = {"real": str(Path(real_folder).resolve()), "start": str(preset.path.resolve()),
+                  "phi": describe_phi(encoder), "identity": {**cfg.identity(), "params": list(cfg.params),
+                                                             "real": str(Path(real_folder).resolve()),
+                                                             "start": str(preset.path.resolve())}}
+        _check_record(out, record)
+        x0 = start_values(preset.raw, cfg.params)
+        study = _study(out, cfg, x0)
+        stop = StopSignals()
+
+        def objective(trial) -> float:
+            values = _suggest(trial, cfg.params)
+            try:
+                candidate = Preset.from_dict(apply(preset.raw, values), path=preset.path)
+                images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
+            except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
+                trial.set_user_attr("invalid", str(e))
+                return FAILED
+            s = score(images, real, encoder, cfg.phi_weight)
+            for key in ("statistics", "phi_ratio", "passed"):
+                trial.set_user_attr(key, s[key])
+            return s["objective"]
+
+        budget = cfg.minutes * 60
+        with tqdm(total=round(budget), unit="s", desc="calibrate", disable=not progress or None) as bar:
+            while True:
+                spent, done = searched_seconds(study), len(study.trials)
+                bar.n = min(round(spent), round(budget))
+                if study.best_trials:
+                    bar.set_postfix(trials=done, best=f"{study.best_value:.3g}")
+                bar.refresh()
+                if spent >= budget or (cfg.trials is not None and done >= cfg.trials):
+                    break
+                if stop.signal:
+                    raise Stopped(stop.signal, f"stopped after trial {done - 1}; rerun the same command to "
+                                               f"continue ({out}/study.db keeps every trial)")
+                study.optimize(objective, n_trials=1, catch=())
+        stop.restore()
+        best = study.best_trial
+        best_raw = apply(preset.raw, {n: best.params[n] for n in cfg.params})
+        final = replace(cfg, seed=cfg.seed + 1)
+        shown = {}
+        for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
+            images = render_chips(p, cfg.final_chips, final, final.seed)
+            shown[name] = (images, final_score(images, real, encoder, cfg))
+        write_report(out, record, cfg, preset, best_raw, real, study, shown)
+    finally:
+        lock.release()
+    return out
+

@@ -1,0 +1,122 @@
+"""What `sasmi calibrate` writes: RUN/preset.toml, RUN/report.md, RUN/objective.png and RUN/sheet.png.
+
+The report compares the start and the calibrated preset on renders of scenes no trial rendered
+(seed + 1), each statistic against the real chips' median with its `sasmi stats --check` tolerance,
+and the φ-FID ratio as `sasmi evaluate` measures it.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from sasmi.chips.compare import TOLERANCES
+from sasmi.chips.stats import STATISTICS
+from sasmi.images import write_text
+from sasmi.realism.preset_space import start_values
+
+SHOWN = 6  # chips per column of the sheet
+
+
+def searched_seconds(study) -> float:
+    """Search time of every finished trial of all runs together: what --minutes counts."""
+    return sum((t.datetime_complete - t.datetime_start).total_seconds() for t in study.trials
+               if t.datetime_complete is not None and t.datetime_start is not None)
+
+
+def _number(v: float) -> str:
+    return "—" if not math.isfinite(v) else f"{v:.3g}"
+
+
+def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str, float]) -> str:
+    from sasmi.realism.fit_scene import preset_toml
+
+    before = start_values(start.raw, cfg.params)
+    header = [f"# Calibrated by `sasmi calibrate` from {Path(record['start']).name} to the chips of "
+              f"{record['real']}", f"# ({len(cfg.params)} knobs; docs/calibrate.md). Start -> calibrated:"]
+    header += [f"#   {n}: {before[n]:.4g} -> {best_values[n]:.4g}" for n in cfg.params]
+    return "\n".join(header) + "\n" + preset_toml(best_raw)
+
+
+def statistics_table(real, shown: dict) -> list[str]:
+    lines = ["| statistic | real | start | calibrated | tolerance |", "|---|---|---|---|---|"]
+    for key in real.checked:
+        tol = TOLERANCES[key]
+        cells = [STATISTICS[key][0], _number(real.medians[key])]
+        for name in ("start", "calibrated"):
+            s = shown[name][1]
+            cells.append(f"{_number(s['medians'][key])} {'ok' if s['distances'][key] <= 1 else '**FAIL**'}")
+        lines.append("| " + " | ".join(cells + [tol.describe()]) + " |")
+    passed = [f"{shown[n][1]['passed']} of {len(real.checked)}" for n in ("start", "calibrated")]
+    lines.append(f"| **within tolerance** | | {passed[0]} | {passed[1]} | |")
+    return lines
+
+
+def objective_figure(study, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    from sasmi.eval.report import save_figure
+
+    done = [t for t in study.trials if t.value is not None and t.datetime_complete is not None]
+    t0 = study.trials[0].datetime_start
+    minutes = np.array([(t.datetime_complete - t0).total_seconds() / 60 for t in done])
+    values = np.array([t.value for t in done])
+    fig = Figure(figsize=(9, 3.5))
+    ax, ax_pass = fig.subplots(1, 2)
+    ax.scatter(minutes, values, s=6, color="0.6", label="trial")
+    ax.plot(minutes, np.minimum.accumulate(values), color="C0", label="best so far")
+    ax.set(xlabel="minutes since the first trial", ylabel="objective", yscale="log", title="objective")
+    ax.legend()
+    best = np.minimum.accumulate(values)
+    passes = [next(t.user_attrs.get("passed", 0) for t in done if t.value == b) for b in best]
+    ax_pass.step(minutes, passes, where="post")
+    ax_pass.set(xlabel="minutes since the first trial", ylabel="statistics",
+                title="best trial: statistics within tolerance", ylim=(0, len(TOLERANCES) + 0.5))
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def sheet_figure(real, shown: dict, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    from sasmi.eval.report import save_figure
+
+    columns = [("real", real.images), ("start", shown["start"][0]), ("calibrated", shown["calibrated"][0])]
+    fig = Figure(figsize=(6, 2 * SHOWN))
+    axes = fig.subplots(SHOWN, 3)
+    rng = np.random.default_rng(0)
+    for col, (name, images) in enumerate(columns):
+        picks = rng.choice(len(images), min(SHOWN, len(images)), replace=False)
+        for row in range(SHOWN):
+            ax = axes[row, col]
+            ax.axis("off")
+            if row < len(picks):
+                ax.imshow(images[picks[row]], cmap="gray", vmin=0, vmax=1)
+            if row == 0:
+                ax.set_title(name)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict) -> None:
+    best = study.best_trial
+    write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params))
+    objective_figure(study, out / "objective.png")
+    sheet_figure(real, shown, out / "sheet.png")
+    ratio = {n: f"{s['phi_ratio']:.2f} ± {s['phi_ratio_std']:.2f}" for n, (_, s) in shown.items()}
+    lines = [
+        f"# Calibration of {Path(record['start']).name} to {record['real']}", "",
+        f"{len(study.trials)} trials in {searched_seconds(study) / 60:.1f} minutes of search ({cfg.sampler}, "
+        f"{cfg.chips} renders of {cfg.size}² px per trial); best: trial {best.number}, objective "
+        f"{best.value:.3g} (start {study.trials[0].value:.3g}). Measured in φ: {record['phi']}.", "",
+        f"Below, {cfg.final_chips} renders of scenes no trial rendered (seed {cfg.seed + 1}) against the "
+        f"{len(real.phi)} real chips.", "",
+        f"φ-FID ratio to the real chips (1 = as close as real chips to each other): start {ratio['start']}, "
+        f"calibrated {ratio['calibrated']}.", "",
+        *statistics_table(real, shown), "",
+        "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
+        "search: `objective.png`.", "",
+        "![sheet](sheet.png)", "", "![objective](objective.png)", "",
+    ]
+    write_text(out / "report.md", "\n".join(lines))

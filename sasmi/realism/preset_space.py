@@ -1,0 +1,187 @@
+"""The knobs `sasmi calibrate` turns: a preset's fields as numbers a derivative-free search can move.
+
+A knob is a preset field ("post.gain") whose centre is searched over a physical range that holds any
+sonar's value, so every start preset lies inside it; `targets.size` and `targets.burial` are factors on
+every [[targets]] kind's sizes or burial depths (1 = the start). "FIELD.spread" searches how widely the
+field is drawn around its centre: uniform over centre x (1 ± spread), 0 being a fixed value. A knob
+left out keeps the start preset's value and spread. docs/calibrate.md lists them and why each range.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+from sasmi.errors import SasmiError
+from sasmi.scene.preset import SECTIONS
+
+
+@dataclass(frozen=True)
+class Knob:
+    low: float
+    high: float
+    log: bool  # searched on a log scale: a factor of 2 weighs the same at any value
+    ceiling: float | None = None  # largest value the field allows (albedo <= 1): draws are clipped to it
+    whole: bool = False  # an integer field (rocks): draws are rounded
+
+
+KNOBS: dict[str, Knob] = {
+    "sonar.altitude": Knob(1.5, 30.0, True),
+    "sonar.near_range": Knob(5.0, 150.0, True),
+    "sonar.chip_size": Knob(3.0, 60.0, True),  # sets the pixel size: shadows and highlights in px
+    "sonar.track_length": Knob(1.0, 50.0, True),
+    "sonar.cone_angle": Knob(10.0, 80.0, False, 89.0),
+    "seafloor.albedo": Knob(0.05, 0.95, True, 1.0),
+    "seafloor.rms_height": Knob(0.001, 0.1, True),
+    "seafloor.correlation_length": Knob(0.1, 10.0, True),
+    "seafloor.ripple_amplitude": Knob(0.0, 0.05, False),
+    "seafloor.rocks": Knob(0.0, 60.0, False, whole=True),
+    "seafloor.rock_radius": Knob(0.03, 1.0, True),
+    "post.gain": Knob(0.03, 2.0, True),
+    "post.tvg_strength": Knob(0.0, 1.0, False, 1.0),
+    "post.noise_floor": Knob(0.0, 0.1, False),
+    "post.speckle_looks": Knob(0.5, 30.0, True),
+    "post.speckle_cell_range": Knob(0.0, 0.5, False),
+    "post.speckle_cell_track": Knob(0.0, 0.5, False),
+    "post.noise_std": Knob(0.0, 0.1, False),
+    "targets.size": Knob(0.25, 4.0, True),  # a factor on every size of every [[targets]] kind
+    "targets.burial": Knob(0.0, 3.0, False),  # a factor on every [[targets]] kind's burial
+}
+SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
+TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale")
+DEFAULT_KNOBS = (*KNOBS, "post.gain.spread", "seafloor.albedo.spread", "sonar.altitude.spread")
+
+
+def knob(name: str) -> Knob:
+    if name.endswith(".spread") and name[:-len(".spread")] in KNOBS and not name.startswith("targets."):
+        return SPREAD
+    if name not in KNOBS:
+        raise SasmiError(f"--params: unknown parameter {name} (allowed: {', '.join(KNOBS)}, and FIELD.spread "
+                         "for each field outside targets)")
+    return KNOBS[name]
+
+
+def check_knobs(names: tuple[str, ...]) -> tuple[str, ...]:
+    if not names:
+        raise SasmiError("--params: no parameter given")
+    for name in names:
+        knob(name)
+    if len(set(names)) != len(names):
+        raise SasmiError(f"--params: {', '.join(names)} names a parameter twice")
+    return names
+
+
+def centre(value) -> float:
+    """The middle of a preset value: itself, a uniform's midpoint, a normal's mean, a choice's mean."""
+    if not isinstance(value, dict):
+        return float(value)
+    kind, args = next(iter(value.items()))
+    return float(sum(args) / len(args)) if kind in ("uniform", "choice") else float(args[0])
+
+
+def spread(value) -> float:
+    """Half-width of a value's draws over its centre: 0 for a fixed value, 1 for uniform [0, 2c]."""
+    c = centre(value)
+    if not isinstance(value, dict) or c == 0:
+        return 0.0
+    kind, args = next(iter(value.items()))
+    if kind == "uniform":
+        return (args[1] - args[0]) / 2 / abs(c)
+    if kind == "normal":
+        return math.sqrt(3.0) * args[1] / abs(c)  # the uniform of the same std
+    return (max(args) - min(args)) / 2 / abs(c)
+
+
+def _field(raw: dict, section: str, key: str):
+    return raw.get(section, {}).get(key, SECTIONS[section].__dataclass_fields__[key].default)
+
+
+def start_values(raw: dict, names: tuple[str, ...]) -> dict[str, float]:
+    """Each knob's value in the start preset `raw`, clipped into its range."""
+    raw = explicit_geometry(raw)
+    values = {}
+    for name in names:
+        if name.startswith("targets."):
+            value = 1.0
+        else:
+            field = name[:-len(".spread")] if name.endswith(".spread") else name
+            value = _field(raw, *field.split("."))
+            value = spread(value) if name.endswith(".spread") else centre(value)
+        k = knob(name)
+        values[name] = min(max(value, k.low), k.high)
+    return values
+
+
+def explicit_geometry(raw: dict) -> dict:
+    """`raw` with sonar.altitude written out (0 means max_range / 10): moving max_range so that a moved
+    chip stays in range must not move the array."""
+    sonar = raw.get("sonar", {})
+    if centre(sonar.get("altitude", 0.0)) > 0:
+        return raw
+    raw = copy.deepcopy(raw)
+    raw.setdefault("sonar", {})["altitude"] = float(f"{_field(raw, 'sonar', 'max_range') / 10:.6g}")
+    return raw
+
+
+def _rounded(v: float, whole: bool) -> float | int:
+    return int(round(v)) if whole else float(f"{v:.4g}")  # 4 digits: a preset people read
+
+
+def _with_centre_and_spread(value, c: float, s: float | None, k: Knob):
+    """A value centred on `c`; a uniform over c x (1 ± s) when s > 0 (s None: keep the value's own spread)."""
+    def clip(v: float) -> float | int:
+        v = max(v, 0.0)
+        return _rounded(min(v, k.ceiling) if k.ceiling is not None else v, k.whole)
+
+    if isinstance(value, dict) and "choice" in value and s is None:
+        old = centre(value)
+        return {"choice": [clip(v * c / old if old else c) for v in value["choice"]]}
+    s = spread(value) if s is None else s
+    if s <= 0:
+        return clip(c)
+    return {"uniform": [clip(c * (1 - s)), clip(c * (1 + s))]}
+
+
+def _scaled(value, factor: float, whole: bool = False):
+    """A value or distribution with every number times `factor` (a normal's mean and std)."""
+    if not isinstance(value, dict):
+        return _rounded(value * factor, whole)
+    kind, args = next(iter(value.items()))
+    return {kind: [_rounded(a * factor, whole) for a in args]}
+
+
+def apply(raw: dict, values: dict[str, float]) -> dict:
+    """A copy of preset `raw` with every knob set; max_range grows when the chip would leave it."""
+    raw = copy.deepcopy(explicit_geometry(raw))
+    for name, v in values.items():
+        if name.startswith("targets."):
+            keys = TARGET_SIZES if name == "targets.size" else ("burial",)
+            tables = [*raw.get("targets", []), raw.get("target_grid", {}).get("target", {})]
+            for table in tables:
+                for key in keys:
+                    if key in table:  # a size left out keeps its default: it may not apply to the shape
+                        table[key] = _scaled(table[key], v)
+            continue
+        if name.endswith(".spread"):
+            continue
+        section, key = name.split(".")
+        table = raw.setdefault(section, {})
+        table[key] = _with_centre_and_spread(_field(raw, section, key), v, values.get(f"{name}.spread"), KNOBS[name])
+    for name, s in values.items():  # a spread whose centre is not searched keeps the start's centre
+        field = name[:-len(".spread")]
+        if name.endswith(".spread") and field not in values:
+            section, key = field.split(".")
+            raw[section][key] = _with_centre_and_spread(_field(raw, section, key), centre(_field(raw, section, key)),
+                                                        s, KNOBS[field])
+    sonar = raw["sonar"]
+    far = max(_ends(_field(raw, "sonar", "near_range"))) + max(_ends(_field(raw, "sonar", "chip_size")))
+    if _field(raw, "sonar", "max_range") < far:
+        sonar["max_range"] = float(f"{far * 1.05:.4g}")
+    return raw
+
+
+def _ends(value) -> list[float]:
+    if not isinstance(value, dict):
+        return [float(value)]
+    kind, args = next(iter(value.items()))
+    return [args[0] - 4 * args[1], args[0] + 4 * args[1]] if kind == "normal" else [float(a) for a in args]

@@ -1,0 +1,156 @@
+"""`sasmi calibrate`: the knobs write the presets they say, the objective's distances, and a search that
+recovers a known preset's gain from its own renders, continues when rerun and refuses other settings."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from sasmi.chips.compare import TOLERANCES, Tolerance
+from sasmi.errors import SasmiError
+from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
+from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, spread, start_values
+from sasmi.scene.preset import Preset, load_preset, shipped_presets
+
+
+@pytest.mark.parametrize("name", shipped_presets())
+def test_start_values_rebuild_the_start_preset(name):
+    """Setting every knob to its start value leaves each field's centre where it was (within the knob's
+    range and 4 digits), and the result is a valid preset."""
+    preset = load_preset(name)
+    values = start_values(preset.raw, DEFAULT_KNOBS)
+    raw = apply(preset.raw, values)
+    Preset.from_dict(raw)
+    for knob_name, value in values.items():
+        if knob_name.startswith("targets.") or knob_name.endswith(".spread"):
+            continue
+        section, key = knob_name.split(".")
+        if key in preset.raw.get(section, {}) and KNOBS[knob_name].low <= centre(preset.raw[section][key]) \
+                <= KNOBS[knob_name].high and not KNOBS[knob_name].whole:
+            assert centre(raw[section][key]) == pytest.approx(centre(preset.raw[section][key]), rel=1e-3), knob_name
+
+
+def test_knobs_move_the_fields_they_name():
+    raw = load_preset("cylinder_chip").raw
+    moved = apply(raw, {"post.gain": 0.2, "post.gain.spread": 0.5, "targets.size": 2.0, "sonar.near_range": 80.0})
+    assert moved["post"]["gain"] == {"uniform": [0.1, 0.3]}
+    assert spread(moved["post"]["gain"]) == pytest.approx(0.5)
+    for before, after in zip(raw["targets"], moved["targets"]):
+        for key in ("length", "radius", "width", "height"):
+            if key in before:
+                assert centre(after[key]) == pytest.approx(2 * centre(before[key]), rel=1e-3)
+        assert after["yaw"] == before["yaw"] if "yaw" in before else True
+    far = max(moved["sonar"]["near_range"]["uniform"]) + moved["sonar"]["chip_size"]
+    assert moved["sonar"]["max_range"] >= far  # the chip stays in range
+    assert raw["post"]["gain"] == {"uniform": [0.22, 0.68]}  # the start is not changed in place
+
+
+def test_altitude_is_written_out_before_the_range_moves():
+    raw = load_preset("muscle_paper").raw  # no altitude: max_range / 10 = 6 m
+    moved = apply(raw, {"sonar.chip_size": 40.0})
+    assert moved["sonar"]["altitude"] == 6.0 and moved["sonar"]["max_range"] > 60
+
+
+def test_spread_only_keeps_the_centre():
+    raw = load_preset("cylinder_chip").raw
+    moved = apply(raw, {"seafloor.albedo.spread": 0.0})
+    assert moved["seafloor"]["albedo"] == pytest.approx(0.35)
+
+
+def test_unknown_and_repeated_knobs_are_refused():
+    with pytest.raises(SasmiError, match="unknown parameter post.gian"):
+        check_knobs(("post.gian",))
+    with pytest.raises(SasmiError, match="twice"):
+        check_knobs(("post.gain", "post.gain"))
+    with pytest.raises(SasmiError, match="unknown parameter targets.size.spread"):
+        check_knobs(("targets.size.spread",))
+
+
+@pytest.mark.parametrize("tol", list(TOLERANCES.values()) + [Tolerance("ratio", 0.5, 3.0)])
+def test_distance_is_within_one_exactly_where_the_tolerance_holds(tol):
+    rng = np.random.default_rng(0)
+    for reference in (0.3, 5.0, 40.0):
+        for other in reference * np.exp(rng.normal(0, 0.6, 200)):
+            assert (tol.distance(reference, other) <= 1) == tol.holds(reference, other), (tol, reference, other)
+    assert tol.distance(1.0, math.nan) == math.inf
+
+
+def test_ratio_distance_counts_half_and_double_alike():
+    tol = Tolerance("ratio", 0.5, 2.0)
+    assert tol.distance(10, 20) == pytest.approx(1.0) and tol.distance(10, 5) == pytest.approx(1.0)
+    assert tol.distance(10, 40) == pytest.approx(2.0)
+
+
+PRESET = """
+[sonar]
+max_range = 60.0
+near_range = 30.0
+chip_size = 12.0
+[seafloor]
+albedo = 0.5
+rms_height = 0.01
+[[targets]]
+shape = "cylinder"
+x = {uniform = [-1.5, 0.0]}
+yaw = {uniform = [0.0, 180.0]}
+length = 2.0
+radius = 0.4
+[post]
+gain = GAIN
+speckle_looks = 4.0
+noise_std = 0.01
+"""
+
+
+@pytest.fixture(scope="module")
+def known(tmp_path_factory):
+    """Real chips made by a known preset (gain 0.3, seed 5), and a start preset at 2.5 x that gain."""
+    root = tmp_path_factory.mktemp("calibrate")
+    truth = Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3")))
+    images = render_chips(truth, 40, CalibrateConfig(size=64), seed=5)
+    real = root / "real"
+    real.mkdir()
+    for i, image in enumerate(images):
+        Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real / f"{i:03d}.png")
+    start = root / "start.toml"
+    start.write_text(PRESET.replace("GAIN", "0.75"))
+    return real, start
+
+
+def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_path):
+    real, start = known
+    cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16)
+    out = calibrate(real, start, cfg, tmp_path / "run", progress=False)
+    fitted = load_preset(out / "preset.toml")
+    assert fitted.raw["post"]["gain"] == pytest.approx(0.3, rel=0.15)
+    report = (out / "report.md").read_text()
+    assert "post.gain: 0.75 ->" in (out / "preset.toml").read_text()
+    assert "25 trials" in report and (out / "sheet.png").is_file() and (out / "objective.png").is_file()
+
+    import optuna
+
+    study = optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}")
+    first = [t.params for t in study.trials]
+    assert first[0] == {"post.gain": 0.75}  # trial 0: the start preset
+    calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "trials": 30}), out, progress=False)
+    study = optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}")
+    assert len(study.trials) == 30 and [t.params for t in study.trials[:25]] == first
+
+    with pytest.raises(SasmiError, match="other settings \\(chips\\)"):
+        calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "chips": 20}), out, progress=False)
+
+
+def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
+    real, start = known
+    for args, words in ((["--params", "post.gian"], "unknown parameter post.gian"),
+                        (["--chips", "4"], "--chips"), (["--preset", str(tmp_path / "none.toml")], "not found")):
+        done = subprocess.run([sys.executable, "-m", "sasmi", "calibrate", "--real", str(real), "--out",
+                               str(tmp_path / "run"), *args], capture_output=True, text=True)
+        assert done.returncode == 2 and words in done.stderr and "Traceback" not in done.stderr, done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "run" / "study.db").exists()
