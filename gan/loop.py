@@ -14,7 +14,6 @@ exactly. A second signal acts at once, as it would without sasmi.
 """
 from __future__ import annotations
 
-import fcntl
 import os
 import signal
 import threading
@@ -27,6 +26,7 @@ import torch
 from sasmi.gan import distributed
 from sasmi.gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
 from sasmi.errors import SasmiError, Stopped
+from sasmi.images import FolderLock
 
 Logs = dict[str, float]
 
@@ -156,28 +156,3 @@ class StopSignals:
         for s, handler in self.previous.items():
             signal.signal(s, handler)
         self.previous = {}
-
-
-class FolderLock:
-    """An exclusive lock on a run folder (RUN/.lock), or a SasmiError when another process holds it. The
-    kernel drops it when its process ends, however it ends: a killed training never leaves it behind."""
-
-    def __init__(self, folder: str | os.PathLike, what: str):
-        path = Path(folder) / ".lock"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.file = open(path, "a+")
-        try:
-            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self.file.seek(0)
-            holder = self.file.read().strip() or "another process"
-            self.file.close()
-            raise SasmiError(f"{folder}: {holder} is {what} in this folder; wait for it to end, "
-                             f"or choose another --out") from None
-        self.file.seek(0)
-        self.file.truncate()
-        self.file.write(f"sasmi (pid {os.getpid()})")
-        self.file.flush()
-
-    def release(self) -> None:
-        self.file.close()  # closing drops the lock

@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.images import list_images, read_gray, write_gray, write_text
+from sasmi.images import FolderLock, list_images, read_gray, write_gray, write_text
 from sasmi.labels import ChipLabel, read_labels
 from sasmi.preprocess import resize, signed_to_unit, unit_to_signed
 
@@ -94,6 +94,17 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
         raise SasmiError(f"{in_dir}: no image (png, jpg, tif, tiff, npy) in it")
     if out_dir.resolve() == in_dir.resolve() or in_dir.resolve() in out_dir.resolve().parents:
         raise SasmiError(f"--out {out_dir}: must lie outside the input folder {in_dir}")
+    lock = FolderLock(out_dir, "translating")  # two generators into one folder would mix their chips
+    try:
+        written = _translate_all(generator, paths, in_dir, out_dir, batch)
+        write_text(out_dir / "translate.json", json.dumps(
+            {"input": str(in_dir.resolve()), "images": written, **(provenance or {})}, indent=2) + "\n")
+    finally:
+        lock.release()
+    return written
+
+
+def _translate_all(generator: torch.nn.Module, paths: list[Path], in_dir: Path, out_dir: Path, batch: int) -> int:
     render_set = (in_dir / "images").is_dir()
     src_root = in_dir / "images" if render_set else in_dir
     dst_root = out_dir / "images" if render_set else out_dir
@@ -122,6 +133,4 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
 
     if render_set:
         carry_labels(in_dir, out_dir)
-    write_text(out_dir / "translate.json", json.dumps(
-        {"input": str(in_dir.resolve()), "images": written, **(provenance or {})}, indent=2) + "\n")
     return written

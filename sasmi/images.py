@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import math
 import os
 import shutil
@@ -258,3 +259,28 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
         folder = folder / "images"
     return sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
                   and not p.name.startswith("."))
+
+
+class FolderLock:
+    """An exclusive lock on a run folder (RUN/.lock), or a SasmiError when another process holds it. The
+    kernel drops it when its process ends, however it ends: a killed training never leaves it behind."""
+
+    def __init__(self, folder: str | os.PathLike, what: str):
+        path = Path(folder) / ".lock"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.file = open(path, "a+")
+        try:
+            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.file.seek(0)
+            holder = self.file.read().strip() or "another process"
+            self.file.close()
+            raise SasmiError(f"{folder}: {holder} is {what} in this folder; wait for it to end, "
+                             f"or choose another --out") from None
+        self.file.seek(0)
+        self.file.truncate()
+        self.file.write(f"sasmi (pid {os.getpid()})")
+        self.file.flush()
+
+    def release(self) -> None:
+        self.file.close()  # closing drops the lock

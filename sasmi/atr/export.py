@@ -20,7 +20,7 @@ import torch
 
 from sasmi.atr.datasets import RenderSet
 from sasmi.errors import SasmiError
-from sasmi.images import atomic_path, write_text
+from sasmi.images import FolderLock, atomic_path, write_text
 
 FORMATS = ("coco", "yolo")
 
@@ -38,7 +38,6 @@ def coco_dict(renders: RenderSet, companions: bool = True) -> dict:
     images, annotations = [], []
     for i in range(len(renders)):
         image, target = renders[i]
-        label = renders.labels[i]
         _, h, w = image.shape
         image_id = int(target["image_id"])
         images.append({"id": image_id, "file_name": str(renders.image_path(i).relative_to(renders.folder)),
@@ -81,6 +80,15 @@ def export_yolo(folder: str | os.PathLike, out: str | os.PathLike, companions: b
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SasmiError(f"--out {out}: exists and is not a folder")
+    lock = FolderLock(out, "exporting")  # two sets into one folder would mix their images and labels
+    try:
+        _write_yolo(renders, out, companions)
+    finally:
+        lock.release()
+    return out
+
+
+def _write_yolo(renders: RenderSet, out: Path, companions: bool) -> None:
     for i in range(len(renders)):
         image, target = renders[i]
         label = renders.labels[i]
@@ -97,4 +105,3 @@ def export_yolo(folder: str | os.PathLike, out: str | os.PathLike, companions: b
     names = "\n".join(f"  {i}: {name}" for i, name in enumerate(renders.categories))
     write_text(out / "data.yaml", f"# sasmi render set {renders.folder.resolve()}\npath: {out.resolve()}\n"
                                   f"train: images/train\nval: images/val\nnames:\n{names}\n")
-    return out

@@ -150,7 +150,7 @@ def fit(plan: FitPlan, device) -> Path:
     for flag, folder in folders.items():
         if not list_images(folder):
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
-    from sasmi.gan.loop import FolderLock
+    from sasmi.images import FolderLock
 
     state = State(plan)
     out = Path(plan.out)

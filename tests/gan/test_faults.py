@@ -78,7 +78,7 @@ def test_sigterm_stops_after_a_step_with_a_checkpoint_and_the_resume_is_exact(tm
 
 
 def test_a_second_training_in_a_busy_folder_is_refused_in_one_line(tmp_path, real_chips, capsys):
-    from sasmi.gan.loop import FolderLock
+    from sasmi.images import FolderLock
 
     args = [*TRAIN, "--real", str(real_chips / "targets"), "--steps", "2", "--out", str(tmp_path / "run")]
     assert cli.main(args) == 0
