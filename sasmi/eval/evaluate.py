@@ -143,7 +143,8 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     order = np.random.default_rng(cfg.seed).permutation(len(real.phi))
     half = len(order) // 2
     half_a, half_b = real.phi[order[:half]], real.phi[order[half:]]
-    reference = metrics.fid_real_split(real.phi, cfg.bootstrap, cfg.seed)
+    splits = metrics.RealSplits(real.phi, cfg.seed)  # the ratio's denominators: computed once for every set
+    reference = metrics.fid_real_split(real.phi, cfg.bootstrap, splits=splits)
     k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
     precision, recall = metrics.precision_recall_real_split(real.phi, cfg.pr_k, cfg.bootstrap, cfg.seed)
     real_levels = gray_levels(real.images)
@@ -156,7 +157,7 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     for i, s in enumerate(tqdm(sets, desc="realism", unit="set", leave=False, disable=None)):
         seed = cfg.seed + 1 + i
         f = metrics.fid_bootstrap(s.phi, real.phi, cfg.bootstrap, seed)
-        ratio = metrics.fid_ratio_matched(s.phi, real.phi, cfg.bootstrap, cfg.seed)  # every set on the same splits
+        ratio = metrics.fid_ratio_matched(s.phi, real.phi, cfg.bootstrap, cfg.seed, splits)  # the same splits
         k = metrics.kid(s.phi / scale, real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, seed)
         precision, recall = metrics.precision_recall_matched(real.phi, s.phi, cfg.pr_k, cfg.bootstrap, seed)
         rows[s.name] = {"n": len(s.phi), "fid": f.value, "fid_std": f.std, "fid_ratio": ratio.value,

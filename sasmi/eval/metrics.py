@@ -6,7 +6,10 @@ reads files, draws or knows about image sets. Definitions: docs/evaluate.md.
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -75,56 +78,128 @@ def one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
+FID_RESAMPLES = 100  # at most: a std from 100 resamples is within about 7 % of the true spread
+MC_ERROR = 0.005  # replicates stop once their mean is known to this (the figures' second decimal) ...
+MIN_REPLICATES = 50  # ... and at least this many are in
+BATCH = 10  # replicates computed between two checks of the stop rule: fixed, so that results do not depend on the cores
+
+
+def cores() -> int:
+    return len(os.sched_getaffinity(0))
+
+
+def replicates(compute: Callable, draw: Callable[[int], object], n: int,
+               known: Callable[[np.ndarray], bool] | None = None, desc: str = "") -> np.ndarray:
+    """compute(draw(i)) for i < n, in order: draws in this thread (one random stream), computations on
+    every core (LAPACK releases the GIL; each call is one BLAS thread). With `known`, stop once at least
+    MIN_REPLICATES are in and known(replicates so far) holds."""
+    out = []
+    with ThreadPoolExecutor(cores()) as pool, tqdm(total=n, desc=desc, leave=False, disable=None) as bar:
+        for start in range(0, n, BATCH):
+            inputs = [draw(i) for i in range(start, min(start + BATCH, n))]
+            out += pool.map(compute, inputs)
+            bar.update(len(inputs))
+            if known is not None and len(out) >= MIN_REPLICATES and known(np.asarray(out, np.float64)):
+                break
+    return np.asarray(out, np.float64)
+
+
+def mean_known(values: np.ndarray, relative: bool = False) -> bool:
+    """Whether the mean of each column of `values` (replicates in rows) has a standard error within
+    MC_ERROR (relative: within MC_ERROR of the mean's size)."""
+    se = values.std(axis=0, ddof=1) / math.sqrt(len(values))
+    return bool(np.all(se <= MC_ERROR * (np.abs(values.mean(axis=0)) if relative else 1.0)))
+
+
+def _estimate(values: np.ndarray) -> Estimate:
+    return Estimate(float(np.mean(values)), float(np.std(values, ddof=1)) if len(values) > 1 else math.nan)
+
+
 def fid_bootstrap(feats_a: np.ndarray, feats_b: np.ndarray, n: int = 100, seed: int = 0) -> Estimate:
-    """FID of the full sets ± the std of FIDs of `n` bootstrap resamples (both sets resampled)."""
+    """FID of the full sets ± the std of FIDs of min(n, FID_RESAMPLES) bootstrap resamples (both sets)."""
     a, b = np.asarray(feats_a, np.float64), np.asarray(feats_b, np.float64)
     rng = np.random.default_rng(seed)
+    n = min(n, FID_RESAMPLES)
     with one_blas_thread():
-        reps = [fid(a[rng.integers(0, len(a), len(a))], b[rng.integers(0, len(b), len(b))])
-                for _ in tqdm(range(n), desc="FID bootstrap", leave=False, disable=None)]
-    return Estimate(fid(a, b), float(np.std(reps, ddof=1)) if n > 1 else math.nan)
+        reps = replicates(lambda ab: fid(*ab), lambda i: (a[rng.integers(0, len(a), len(a))],
+                                                          b[rng.integers(0, len(b), len(b))]), n, desc="FID bootstrap")
+        value = fid(a, b)
+    return Estimate(value, float(np.std(reps, ddof=1)) if n > 1 else math.nan)
 
 
-def fid_real_split(feats_real: np.ndarray, n: int = 100, seed: int = 0) -> Estimate:
-    """Reference FID of real vs real: mean ± std over `n` random splits into two disjoint halves."""
-    x = _as_features(feats_real, 4, "fid_real_split")
-    rng = np.random.default_rng(seed)
-    half = len(x) // 2
-    reps = []
+class RealSplits:
+    """Random halves A | B of the real set, drawn from `seed` alone, and FID(A_m, B) of split i at size m,
+    each computed once: every set compared at size m meets the same splits and the same denominators."""
+
+    def __init__(self, feats_real: np.ndarray, seed: int = 0):
+        self.real = _as_features(feats_real, 4, "real splits")
+        self.half = len(self.real) // 2
+        self.rng = np.random.default_rng([seed, 0])
+        self.orders: list[np.ndarray] = []
+        self.fids: dict[tuple[int, int], float] = {}
+
+    def order(self, i: int) -> np.ndarray:
+        """Split i's permutation (drawn in order, in the calling thread)."""
+        while len(self.orders) <= i:
+            self.orders.append(self.rng.permutation(len(self.real)).astype(np.int32))
+        return self.orders[i]
+
+    def a(self, i: int, m: int) -> np.ndarray:
+        return self.real[self.order(i)[:m]]
+
+    def b(self, i: int) -> np.ndarray:
+        return self.real[self.order(i)[self.half:2 * self.half]]
+
+    def fid(self, i: int, m: int) -> float:
+        if (i, m) not in self.fids:
+            self.fids[(i, m)] = fid(self.a(i, m), self.b(i))
+        return self.fids[(i, m)]
+
+
+def fid_real_split(feats_real: np.ndarray, n: int = 100, seed: int = 0, splits: RealSplits | None = None) -> Estimate:
+    """Reference FID of real vs real: mean ± std over random splits into two disjoint halves, at most `n`,
+    fewer once the mean is known to MC_ERROR of itself."""
+    splits = splits or RealSplits(feats_real, seed)
+    def draw(i: int) -> int:
+        splits.order(i)
+        return i
+
     with one_blas_thread():
-        for _ in tqdm(range(n), desc="FID real halves", leave=False, disable=None):
-            order = rng.permutation(len(x))
-            reps.append(fid(x[order[:half]], x[order[half:2 * half]]))
-    return Estimate(float(np.mean(reps)), float(np.std(reps, ddof=1)) if n > 1 else math.nan)
+        reps = replicates(lambda i: splits.fid(i, splits.half), draw, n, lambda v: mean_known(v, relative=True),
+                          desc="FID real halves")
+    return _estimate(reps)
 
 
-def fid_ratio_matched(feats_set: np.ndarray, feats_real: np.ndarray, n: int = 100, seed: int = 0) -> Estimate:
+def fid_ratio_matched(feats_set: np.ndarray, feats_real: np.ndarray, n: int = 100, seed: int = 0,
+                      splits: RealSplits | None = None) -> Estimate:
     """FID(set, real) / FID(real, real) at equal sample sizes, so FID's small-sample bias cancels.
 
-    Each of `n` replicates splits the real set into random halves A and B, draws
-    m = min(|A|, |set|) images from the set and from A, and computes FID(set_m, B) and
-    FID(A_m, B). Value: mean of the first / mean of the second; ± the std of the
-    per-replicate ratios.
+    Each replicate splits the real set into random halves A and B, draws m = min(|A|, |set|) images
+    from the set and from A, and computes FID(set_m, B) and FID(A_m, B). Value: mean of the first /
+    mean of the second; ± the std of the per-replicate ratios. At most `n` replicates, fewer once the
+    ratio is known to MC_ERROR. Sets given one seed (or one `splits`) meet the same splits, so the
+    ratio of their ratios is free of the splits' noise.
     """
     x = _as_features(feats_set, 2, "fid_ratio_matched (set)")
-    real = _as_features(feats_real, 4, "fid_ratio_matched (real)")
-    # the real splits come from `seed` alone, whatever the set's size: sets given one seed are
-    # compared on the same splits, so the ratio of their ratios is free of the splits' noise
-    split_rng, draw_rng = (np.random.default_rng([seed, stream]) for stream in (0, 1))
-    half = len(real) // 2
-    m = min(half, len(x))
-    num, den = [], []
+    splits = splits or RealSplits(feats_real, seed)
+    draw_rng = np.random.default_rng([seed, 1])
+    m = min(splits.half, len(x))
+
+    def draw(i: int):
+        splits.order(i)
+        return i, draw_rng.choice(len(x), m, replace=False)
+
+    def compute(job) -> tuple[float, float]:
+        i, rows = job
+        return fid(x[rows], splits.b(i)), splits.fid(i, m)
+
     with one_blas_thread():
-        for _ in tqdm(range(n), desc="FID ratio", leave=False, disable=None):
-            order = split_rng.permutation(len(real))
-            a, b = real[order[:m]], real[order[half:2 * half]]
-            num.append(fid(x[draw_rng.choice(len(x), m, replace=False)], b))
-            den.append(fid(a, b))
-    num, den = np.array(num), np.array(den)
+        reps = replicates(compute, draw, n, lambda v: mean_known(v[:, :1] / v[:, 1:]), desc="FID ratio")
+    num, den = reps[:, 0], reps[:, 1]
+    ratios = num / np.where(den > 0, den, np.nan)
     if np.mean(den) <= 0:
         return Estimate(math.nan, math.nan)
-    ratios = num / np.where(den > 0, den, np.nan)
-    return Estimate(float(np.mean(num) / np.mean(den)), float(np.nanstd(ratios, ddof=1)) if n > 1 else math.nan)
+    return Estimate(float(np.mean(num) / np.mean(den)), float(np.nanstd(ratios, ddof=1)) if len(num) > 1 else math.nan)
 
 
 def _poly_kernel(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -197,9 +272,10 @@ def precision_recall_matched(feats_real: np.ndarray, feats_fake: np.ndarray, k: 
     if len(real) == len(fake):
         n = 1  # nothing to draw: every replicate would be the same
     rng = np.random.default_rng(seed)
-    with one_blas_thread():  # small matrices: threads cost far more than the work, most of all beside a training
-        reps = [precision_recall(real[rng.choice(len(real), m, replace=False)],
-                                 fake[rng.choice(len(fake), m, replace=False)], k) for _ in range(n)]
+    with one_blas_thread():
+        reps = replicates(lambda rows: precision_recall(real[rows[0]], fake[rows[1]], k),
+                          lambda i: (rng.choice(len(real), m, replace=False), rng.choice(len(fake), m, replace=False)),
+                          n, mean_known, desc="precision/recall")
     return _precision_recall_estimates(reps)
 
 
@@ -210,17 +286,14 @@ def precision_recall_real_split(feats_real: np.ndarray, k: int = 3, n: int = 100
     x = _as_features(feats_real, 2 * (k + 1), "precision_recall_real_split")
     rng = np.random.default_rng(seed)
     half = len(x) // 2
-    reps = []
     with one_blas_thread():
-        for _ in range(n):
-            order = rng.permutation(len(x))
-            reps.append(precision_recall(x[order[:half]], x[order[half:2 * half]], k))
+        reps = replicates(lambda order: precision_recall(x[order[:half]], x[order[half:2 * half]], k),
+                          lambda i: rng.permutation(len(x)), n, mean_known, desc="precision/recall real halves")
     return _precision_recall_estimates(reps)
 
 
-def _precision_recall_estimates(reps: list[tuple[float, float]]) -> tuple[Estimate, Estimate]:
-    """(precision, recall) replicates → each one's mean ± std over them (NaN ± for one)."""
-    values = np.array(reps)  # (n, 2)
+def _precision_recall_estimates(values: np.ndarray) -> tuple[Estimate, Estimate]:
+    """(n, 2) (precision, recall) replicates → each one's mean ± std over them (NaN ± for one)."""
     spread = values.std(axis=0, ddof=1) if len(values) > 1 else np.full(2, math.nan)
     return tuple(Estimate(float(values[:, i].mean()), float(spread[i])) for i in range(2))
 

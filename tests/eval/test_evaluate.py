@@ -134,13 +134,30 @@ def test_every_set_is_compared_on_the_same_real_splits(monkeypatch):
     def feature_set(name, n):
         return FeatureSet(name, Path(name), rng.integers(0, 255, (n, 8, 8), dtype=np.uint8), rng.standard_normal((n, 6)))
 
-    halves = []  # the real half B of each FID left: the ratio's, (set, B) then (A, B) per split
+    halves = []  # the real half B of each FID left: per split, (set a, B), (A, B), then (set b, B)
     monkeypatch.setattr(ev, "fid", lambda a, b: halves.append(b.tobytes()) or 1.0)
-    monkeypatch.setattr(ev, "fid_bootstrap", lambda *args: ev.Estimate(1.0, 0.0))
-    monkeypatch.setattr(ev, "fid_real_split", lambda *args: ev.Estimate(1.0, 0.0))
+    monkeypatch.setattr(ev, "fid_bootstrap", lambda *args, **kwargs: ev.Estimate(1.0, 0.0))
+    monkeypatch.setattr(ev, "fid_real_split", lambda *args, **kwargs: ev.Estimate(1.0, 0.0))
     realism_table(feature_set("real", 40), [feature_set("a", 30), feature_set("b", 300)],
                   EvalConfig(bootstrap=5, kid_subsets=2))
-    assert len(halves) == 2 * 2 * 5 and halves[:10] == halves[10:] and len(set(halves[:10])) == 5
+    # both sets meet the same 5 splits, and FID(A, B) of each is computed once for both
+    assert len(halves) == 3 * 5 and len(set(halves)) == 5 and all(halves.count(h) == 3 for h in halves)
+
+
+def test_replicates_stop_once_the_mean_is_known_and_do_not_depend_on_the_cores(monkeypatch):
+    rng = np.random.default_rng(12)
+    real, close = rng.standard_normal((400, 8)), rng.standard_normal((400, 8)) + 0.3
+    results = {}
+    for workers in (1, 2):
+        monkeypatch.setattr(ev, "cores", lambda: workers)
+        results[workers] = (ev.fid_ratio_matched(close, real, n=300, seed=1), ev.fid_real_split(real, n=300, seed=1),
+                            ev.precision_recall_matched(real, close[:300], k=3, n=300, seed=1))
+    assert results[1] == results[2]
+    calls = []
+    values = ev.replicates(lambda v: calls.append(v) or v, lambda i: 1.0 + 0.01 * (i % 2), 500, ev.mean_known)
+    assert len(values) == len(calls) == ev.MIN_REPLICATES  # a mean known at once stops at the minimum
+    noisy = ev.replicates(lambda v: v, lambda i: rng.normal(0.0, 1.0), 500, ev.mean_known)
+    assert len(noisy) == 500  # a standard error of 1/sqrt(500) is far above MC_ERROR: all are drawn
 
 
 def test_recall_does_not_fall_as_more_chips_are_generated():
