@@ -71,11 +71,9 @@ def test_fitted_preset_renders_what_was_fitted(renderer):
 
 @pytest.mark.parametrize("name", PARAMETERS)
 def test_gradient_matches_central_difference(renderer, encoder, name):
-    """d loss / d θ from AD (torch → Dr.Jit) against a central difference at the same sample seed.
-
-    The relief is gentle enough not to shadow itself at these grazing angles: moving shadow
-    edges are what AD misses (docs/differentiable.md has the ratios on rougher floors).
-    """
+    """d loss / d θ through φ (torch → Dr.Jit and back) against a 3 % central difference at the same sample
+    seed, on relief gentle enough not to shadow itself: the chain through the encoder. The tight check,
+    averaged over seeds on rough floors and a target, is tests/realism/test_gradients.py."""
     from sasmi.gan.losses import phi_loss
 
     scene = relief_preset(0.01, 0.005).sample(0, 0)
@@ -91,7 +89,7 @@ def test_gradient_matches_central_difference(renderer, encoder, name):
     loss(theta).backward()
     i = PARAMETERS.index(name)
     with torch.no_grad():
-        fd = central_difference(lambda x: loss(torch.tensor(x)).item(), theta0, i, 0.01 * theta0[i])
+        fd = central_difference(lambda x: loss(torch.tensor(x)).item(), theta0, i, 0.03 * theta0[i])
     ratio = theta.grad[i].item() / fd
     print(f"{name}: AD {theta.grad[i].item():.4g}, central difference {fd:.4g}, ratio {ratio:.3f}")
     assert 0.7 < ratio < 1.3, ratio
@@ -201,10 +199,10 @@ def test_fit_scene_command(tmp_path, capsys):
                  "--out", str(tmp_path / "again")]) == 0
 
 
-def test_roughness_gradient_right_where_the_floor_shadows_itself(renderer):
+def test_ad_alone_gets_roughness_wrong_where_the_floor_shadows_itself(renderer):
     """Rough floor with a cylinder: Dr.Jit's AD alone gives d mean / d roughness the wrong sign (shadows grow
-    with roughness, and AD does not see moving shadow edges); the central difference it uses instead for
-    roughness and elevation agrees with a central difference of the loss at another step."""
+    with roughness, and AD does not see moving shadow edges), which is why roughness passes back a central
+    difference of the image instead (right within 10 %: tests/realism/test_gradients.py)."""
     preset = Preset.from_dict({
         "sonar": {"near_range": 30.0, "emitters": 16},
         "seafloor": {"rms_height": 0.02, "correlation_length": 0.3, "ripple_amplitude": 0.01},
@@ -213,13 +211,8 @@ def test_roughness_gradient_right_where_the_floor_shadows_itself(renderer):
     scene = preset.sample(0, 0)
     bound = renderer.bind(scene, speckle=False)
     theta0 = scene_parameters(scene)
-
-    def grad(wrt: tuple) -> float:
-        theta = torch.tensor(theta0, dtype=torch.float32, requires_grad=True)
-        renderer.image(bound, theta, 3, wrt=wrt).mean().backward()
-        return theta.grad[0].item()
-
+    theta = torch.tensor(theta0, dtype=torch.float32, requires_grad=True)
+    renderer.image(bound, theta, 3, wrt=()).mean().backward()
     with torch.no_grad():
-        fd = central_difference(lambda x: renderer.image(bound, torch.tensor(x), 3).mean().item(), theta0, 0, 0.02)
-    assert 0.7 < grad(("seafloor.roughness",)) / fd < 1.3
-    assert grad(()) / fd < 0  # AD alone: the wrong sign
+        fd = central_difference(lambda x: renderer.image(bound, torch.tensor(x), 3).mean().item(), theta0, 0, 0.03)
+    assert theta.grad[0].item() / fd < 0  # AD alone: the wrong sign
