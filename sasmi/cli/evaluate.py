@@ -28,7 +28,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--preset", type=Path, metavar="TOML", help="pose sweeps: scene preset whose first target is swept")
     p.add_argument("--generator", type=Path, metavar="RUN", help="pose sweeps: SAS GAN run that translates them")
     p.add_argument("--bootstrap", type=int, default=500, metavar="N",  # EvalConfig's: the config stays unimported here
-                   help="FID resamples, real splits and draws behind each ± (default: 500)")
+                   help="at most this many real splits and draws behind each figure and ± (default: 500; "
+                        "fewer once a mean is known to 0.005; FID's ± from at most 100 resamples)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
     p.add_argument("--no-two-sample", dest="two_sample", action="store_false",
                    help="skip the two-sample test (a classifier per set against the real chips, "

@@ -20,8 +20,9 @@ class TwoSampleConfig:
 
 @dataclass(frozen=True)
 class EvalConfig:
-    # FID resamples, real splits and precision/recall draws behind each ±; each costs one SVD of at most
-    # N×N. 500: at 100 a ratio still moves with the seed several times as much as at 500
+    # the most real splits and precision/recall draws behind each figure (fewer once its mean is known to
+    # 0.005: sasmi.eval.metrics.MC_ERROR); each costs one SVD of at most N×N. 500: a few hundred real chips
+    # need them all (at 100 a ratio still moves with the seed several times as much)
     bootstrap: int = 500
     kid_subsets: int = 100  # KID is averaged over this many random subsets; ± is their std
     kid_subset_size: int = 100  # images per KID subset, at most half the smaller set (Bińkowski et al. 2018)

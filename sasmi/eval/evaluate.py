@@ -107,7 +107,8 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
         warnings.append(f"{REAL_VS_REAL}: each half has {len(real.phi) // 2} images, fewer than φ's {dim} "
                         f"dimensions (see above)")
     with metrics.one_blas_thread():
-        log(f"realism: FID ({cfg.bootstrap} resamples), KID, precision/recall of {len(sets)} sets")
+        log(f"realism: FID, its ratio, KID, precision/recall of {len(sets)} sets (at most {cfg.bootstrap} "
+            "replicates each)")
         realism = realism_table(real, sets, cfg)
         log("coverage: the real chips each set covers least")
         coverage = coverage_metrics(real, sets, cfg, out_dir)

@@ -135,6 +135,26 @@ def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConf
     return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std}
 
 
+def best_valid(study, preset: Preset, cfg: CalibrateConfig, final: CalibrateConfig) -> dict:
+    """The best trial's preset that also draws every scene of the report (and of `cfg.final_chips` more) within
+    the preset's rules: a trial saw only its own scenes, and a preset must hold for every draw."""
+    import optuna
+
+    done = sorted((t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE), key=lambda t: t.value)
+    for trial in done:
+        raw = apply(preset.raw, {n: trial.params[n] for n in cfg.params})
+        try:
+            candidate = Preset.from_dict(raw, path=preset.path)
+            for seed in (final.seed, final.seed + 1):
+                for i in range(cfg.final_chips):
+                    candidate.sample(seed, i)
+        except SasmiError:
+            continue
+        study.set_user_attr("calibrated_trial", trial.number)
+        return raw
+    raise SasmiError(f"no trial's preset draws {cfg.final_chips} valid scenes; rerun with a larger --minutes")
+
+
 def _study(out: Path, cfg: CalibrateConfig, x0: dict[str, float]):
     import optuna
 
@@ -232,9 +252,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                                                f"continue ({out}/study.db keeps every trial)")
                 study.optimize(objective, n_trials=1, catch=())
         stop.restore()
-        best = study.best_trial
-        best_raw = apply(preset.raw, {n: best.params[n] for n in cfg.params})
         final = replace(cfg, seed=cfg.seed + 1)
+        best_raw = best_valid(study, preset, cfg, final)
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)

@@ -100,7 +100,7 @@ def sheet_figure(real, shown: dict, path: Path) -> None:
 
 
 def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict) -> None:
-    best = study.best_trial
+    best = study.trials[study.user_attrs["calibrated_trial"]]
     write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params))
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")

@@ -45,10 +45,12 @@ KNOBS: dict[str, Knob] = {
     "post.speckle_cell_track": Knob(0.0, 0.5, False),
     "post.noise_std": Knob(0.0, 0.1, False),
     "targets.size": Knob(0.25, 4.0, True),  # a factor on every size of every [[targets]] kind
-    "targets.burial": Knob(0.0, 3.0, False),  # a factor on every [[targets]] kind's burial
+    "targets.burial": Knob(0.0, 1.0, False),  # a factor on every kind's burial: no deeper than the start's,
+                                              # which keeps every draw's target above the floor
 }
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
-TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale")
+# burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole
+TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale", "burial")
 DEFAULT_KNOBS = (*KNOBS, "post.gain.spread", "seafloor.albedo.spread", "sonar.altitude.spread")
 
 

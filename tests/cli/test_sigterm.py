@@ -35,3 +35,35 @@ def test_a_render_terminated_midway_says_so_and_its_rerun_completes_the_same_set
     assert [p.name for p in cut] == [p.name for p in whole] and len(cut) == 300
     assert all(a.read_bytes() == b.read_bytes() for a, b in zip(cut, whole))
     assert (tmp_path / "cut" / "labels.jsonl").read_bytes() == (tmp_path / "whole" / "labels.jsonl").read_bytes()
+
+
+@pytest.mark.slow
+def test_a_calibration_terminated_midway_stops_after_its_trial_and_the_rerun_continues(tmp_path, real_chips):
+    import optuna
+
+    command = [sys.executable, "-m", "sasmi", "calibrate", "--real", str(real_chips / "targets"), "--preset",
+               "muscle_paper", "--params", "post.gain,post.speckle_looks", "--chips", "8", "--size", "32",
+               "--trials", "12", "--out", str(tmp_path / "run")]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    storage = f"sqlite:///{tmp_path / 'run' / 'study.db'}"
+
+    def trials() -> list:
+        try:
+            return optuna.load_study(study_name="calibrate", storage=storage).trials
+        except Exception:  # the study is not made yet
+            return []
+
+    deadline = time.monotonic() + 180
+    while len(trials()) < 4:
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.2)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 128 + signal.SIGTERM, err
+    assert "Traceback" not in err and "rerun the same command to continue" in err.strip().splitlines()[-1]
+    before = [t.params for t in trials()]
+    assert 4 <= len(before) < 12 and not (tmp_path / "run" / "preset.toml").exists()
+    subprocess.run(command, check=True, capture_output=True, timeout=300)
+    after = trials()
+    assert len(after) == 12 and [t.params for t in after[:len(before)]] == before
+    assert (tmp_path / "run" / "preset.toml").is_file()

@@ -1,0 +1,53 @@
+#!/bin/sh
+# The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
+# never saw.
+#   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split; 400
+#      renders of the result against the validation targets: `sasmi stats --check` and the φ-FID ratio
+#      beside 400 renders of the hand-matched cylinder_chip.
+#   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
+#      scene group among themselves; 400 renders against the held-back floors of that sonar.
+#
+#     benchmarks/calibrate.sh [RUNS] [MINUTES] [SONAR]        (defaults: runs 30 sassed)
+set -eu
+RUNS=${1:-runs}
+MINUTES=${2:-30}
+SONAR=${3:-sassed}
+SASMI=.venv/bin/sasmi
+DATA=../shared/data/sonar-chips
+FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,\
+seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,\
+seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
+post.speckle_cell_track,post.noise_std,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
+
+$SASMI split $DATA --seed 0 --out "$RUNS/split"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
+    --out "$RUNS/calibrate-muscle"
+$SASMI render "$RUNS/calibrate-muscle/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-muscle/renders"
+$SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/cylinder-renders" --check || true
+$SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-muscle/evaluate" \
+    --set calibrated="$RUNS/calibrate-muscle/renders" --set cylinder_chip="$RUNS/cylinder-renders"
+
+# one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
+.venv/bin/python - "$DATA" "$RUNS/$SONAR" "$SONAR" <<'PY'
+import csv, os, sys
+data, out, sonar = sys.argv[1:]
+rows = [r for r in csv.DictReader(open(f"{data}/MANIFEST.csv")) if r["scene_group"].startswith(sonar)]
+os.makedirs(f"{out}/seafloor", exist_ok=True)
+for r in rows:
+    link = f"{out}/{r['file']}"
+    if not os.path.lexists(link):
+        os.symlink(os.path.abspath(f"{data}/{r['file']}"), link)
+with open(f"{out}/MANIFEST.csv", "w", newline="") as f:
+    writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+print(f"{len(rows)} {sonar} chips in {out}")
+PY
+$SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
+$SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
+    --chips 16 --minutes "$MINUTES" --out "$RUNS/calibrate-$SONAR"
+$SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
+$SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
+$SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \
+    --check || true
