@@ -26,7 +26,7 @@ import numpy as np
 from sasmi.chips.compare import TOLERANCES
 from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError, Stopped
-from sasmi.images import write_text
+from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, knob, start_values
 from sasmi.scene.preset import Preset, load_preset
@@ -34,6 +34,7 @@ from sasmi.scene.preset import Preset, load_preset
 SAMPLERS = ("cmaes", "tpe")
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
 FAILED = 1e3  # objective of a knob setting that makes no valid preset
+ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
 
 
 @dataclass(frozen=True)
@@ -213,6 +214,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     preset = load_preset(start)
     encoder = as_encoder(phi)
     real = real_chips(real_folder, cfg, encoder)  # read before anything is written: a bad folder leaves no RUN
+    check_room(out, ROOM, "a calibration's study and report")
     lock = FolderLock(out, "running sasmi calibrate")
     try:
         record = {"real": str(Path(real_folder).resolve()), "start": str(preset.path.resolve()),
@@ -250,7 +252,13 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                 if stop.signal:
                     raise Stopped(stop.signal, f"stopped after trial {done - 1}; rerun the same command to "
                                                f"continue ({out}/study.db keeps every trial)")
-                study.optimize(objective, n_trials=1, catch=())
+                try:
+                    study.optimize(objective, n_trials=1, catch=())
+                except Exception as e:  # SQLite's own words for a full disk, through SQLAlchemy
+                    if "disk is full" in str(e) or "disk I/O error" in str(e):
+                        raise SasmiError(f"{out}/study.db: cannot write (the disk is full); free some space and "
+                                         "rerun the same command to continue") from None
+                    raise
         stop.restore()
         final = replace(cfg, seed=cfg.seed + 1)
         best_raw = best_valid(study, preset, cfg, final)

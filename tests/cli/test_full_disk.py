@@ -99,3 +99,21 @@ def test_a_render_that_clearly_will_not_fit_is_refused_before_any_work(tmp_path,
     assert err.count("\n") == 1 and f"{out}: 1000 chips need about 33 MB and its disk has 5 MB free" in err
     assert not out.exists()
     assert main(["render", PRESET, "--count", "2", "--size", "32", "--spp", "2", "--out", str(out)]) == 0  # small: fits
+
+
+def test_translate_on_a_full_disk(tmp_path, monkeypatch, capsys, render_set):
+    from sasmi.weights import shipped
+
+    args = ["translate", "--in", str(render_set), "--generator", str(shipped("sasgan"))]
+    assert main([*args, "--out", str(tmp_path / "whole")]) == 0
+    capsys.readouterr()
+    out = tmp_path / "cut"
+    seen = _disk_full_at(monkeypatch, out, 4)  # in the middle of the chips
+    assert main([*args, "--out", str(out)]) == 2
+    _one_line_no_space(capsys)
+    _no_temporary_files(out)
+    assert len(seen) == 4 and not (out / "translate.json").exists()
+    monkeypatch.undo()
+    assert main([*args, "--out", str(out)]) == 0  # the rerun completes the set
+    cut, whole = _files(out), _files(tmp_path / "whole")
+    assert cut.keys() == whole.keys() and all(cut[k] == whole[k] for k in cut if k != "translate.json")

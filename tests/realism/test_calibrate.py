@@ -154,3 +154,17 @@ def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
         assert done.returncode == 2 and words in done.stderr and "Traceback" not in done.stderr, done.stderr
         assert len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "run" / "study.db").exists()
+
+
+def test_a_full_disk_under_the_study_is_one_line(known, tmp_path, monkeypatch):
+    import optuna
+    import sqlalchemy.exc
+
+    def full(*args, **kwargs):
+        raise sqlalchemy.exc.OperationalError("INSERT", {}, Exception("database or disk is full"))
+
+    real, start = known
+    monkeypatch.setattr(optuna.study.Study, "optimize", full)
+    with pytest.raises(SasmiError, match="study.db: cannot write \\(the disk is full\\); free some space"):
+        calibrate(real, start, CalibrateConfig(params=("post.gain",), trials=3, chips=16, size=64), tmp_path / "run",
+                  progress=False)
