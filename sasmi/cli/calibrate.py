@@ -12,6 +12,7 @@ from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from sasmi.cli.render import scheduler_address
     from sasmi.realism.calibrate import SAMPLERS, CalibrateConfig
     from sasmi.realism.preset_space import KNOBS
 
@@ -33,6 +34,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=d.size, help=f"render and statistics size (default: {d.size})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per pixel (default: {d.spp})")
     p.add_argument("--sampler", choices=SAMPLERS, default=d.sampler, help=f"Optuna sampler (default: {d.sampler})")
+    p.add_argument("--workers", type=int, default=1,
+                   help="local Dask processes scoring trials side by side (default: 1, here one after another)")
+    p.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
+                   help="score trials on this Dask cluster instead (the run folder needs no shared disk)")
     p.add_argument("--phi", type=Path, metavar="RUN", help="φ autoencoder run or weights (default: the shipped φ)")
     p.add_argument("--seed", type=int, default=d.seed, help="preset draws of the trials (default: 0)")
     p.set_defaults(run=run)
@@ -44,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
 
     params = DEFAULT_KNOBS if args.params == "default" else tuple(p.strip() for p in args.params.split(",") if p.strip())
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
-                          size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed)
+                          size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
+                          workers=args.workers, scheduler=args.scheduler)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")
     return 0

@@ -15,11 +15,16 @@ rerun continues it, and --minutes counts the search time of all runs together.
 """
 from __future__ import annotations
 
+import contextlib
+import functools
 import json
 import math
+import os
+import time
 import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -49,6 +54,8 @@ class CalibrateConfig:
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     final_chips: int = 200  # renders of the start and the calibrated preset in the report, other scenes
     seed: int = 0  # preset draws of the trials; the report's renders use seed + 1
+    workers: int = 1  # local Dask processes scoring trials side by side (1: here, one after another)
+    scheduler: str | None = None  # or an existing Dask cluster's address
 
     def validate(self) -> "CalibrateConfig":
         check_knobs(self.params)
@@ -61,8 +68,8 @@ class CalibrateConfig:
         return self
 
     def identity(self) -> dict:
-        """What a rerun must share to continue the study: everything but the budget."""
-        return {k: v for k, v in asdict(self).items() if k not in ("minutes", "trials")}
+        """What a rerun must share to continue the study: everything but the budget and where trials run."""
+        return {k: v for k, v in asdict(self).items() if k not in ("minutes", "trials", "workers", "scheduler")}
 
 
 @dataclass(frozen=True)
@@ -199,6 +206,61 @@ def _check_record(out: Path, record: dict) -> None:
     write_text(path, json.dumps(record, indent=2) + "\n")
 
 
+def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: CalibrateConfig, encoder) -> dict:
+    """One trial: the candidate preset's `cfg.chips` renders scored, or the rule one of its draws broke."""
+    try:
+        candidate = Preset.from_dict(raw, path=preset_path)
+        images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
+    except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
+        return {"objective": FAILED, "invalid": str(e)}
+    s = score(images, real, encoder, cfg.phi_weight)
+    return {k: s[k] for k in ("objective", "statistics", "phi_ratio", "passed")}
+
+
+@functools.lru_cache(maxsize=2)
+def _worker_encoder(phi: str | None):
+    from sasmi.eval.features import as_encoder
+
+    return as_encoder(phi)
+
+
+def _on_worker(raw: dict, preset_path: Path | None, real: RealChips, cfg: CalibrateConfig, phi: str | None,
+               threads: int | None) -> dict:
+    """`trial_score` on a Dask worker: its own φ (loaded once per process) and its share of the cores."""
+    import drjit
+    import torch
+
+    torch.set_num_threads(1)
+    if threads:
+        drjit.set_thread_count(threads)
+    return trial_score(raw, preset_path, real, cfg, _worker_encoder(phi))
+
+
+@contextlib.contextmanager
+def trial_runner(cfg: CalibrateConfig, preset: Preset, real: RealChips, encoder, phi) -> Iterator[tuple]:
+    """(run, width): run(raws) -> their scores, `width` trials at a time: here, or on a Dask cluster
+    (--scheduler, or --workers local processes, each with its share of the cores)."""
+    if cfg.workers == 1 and not cfg.scheduler:
+        yield (lambda raws: [trial_score(raw, preset.path, real, cfg, encoder) for raw in raws]), 1
+        return
+    from sasmi.renderset.cluster import dask_client
+    from sasmi.renderset.threads import local_threads
+
+    if phi is not None and not isinstance(phi, (str, os.PathLike)):
+        raise SasmiError("--workers: a φ given as a module cannot travel to the workers; pass its run or file")
+    threads = None if cfg.scheduler else local_threads(cfg.workers)
+    light = replace(real, images=real.images[:0])  # the workers need the statistics and φ, not the chips
+    with dask_client(cfg.scheduler, cfg.workers) as client:
+        shared = client.scatter(light, broadcast=True, hash=False)
+        path = None if phi is None else str(phi)
+
+        def run(raws: list[dict]) -> list[dict]:
+            return client.gather([client.submit(_on_worker, raw, preset.path, shared, cfg, path, threads, pure=False)
+                                  for raw in raws])
+
+        yield run, max(1, sum(client.nthreads().values()))
+
+
 def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, out: str | Path,
               phi=None, progress: bool = True) -> Path:
     """Search the knobs for `cfg.minutes` (all runs together), then write RUN/preset.toml and RUN/report.md."""
@@ -222,25 +284,11 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                                                              "real": str(Path(real_folder).resolve()),
                                                              "start": str(preset.path.resolve())}}
         _check_record(out, record)
-        x0 = start_values(preset.raw, cfg.params)
-        study = _study(out, cfg, x0)
+        study = _study(out, cfg, start_values(preset.raw, cfg.params))
         stop = StopSignals()
-
-        def objective(trial) -> float:
-            values = _suggest(trial, cfg.params)
-            try:
-                candidate = Preset.from_dict(apply(preset.raw, values), path=preset.path)
-                images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
-            except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
-                trial.set_user_attr("invalid", str(e))
-                return FAILED
-            s = score(images, real, encoder, cfg.phi_weight)
-            for key in ("statistics", "phi_ratio", "passed"):
-                trial.set_user_attr(key, s[key])
-            return s["objective"]
-
         budget = cfg.minutes * 60
-        with tqdm(total=round(budget), unit="s", desc="calibrate", disable=not progress or None) as bar:
+        with trial_runner(cfg, preset, real, encoder, phi) as (run, width), \
+                tqdm(total=round(budget), unit="s", desc="calibrate", disable=not progress or None) as bar:
             while True:
                 spent, done = searched_seconds(study), len(study.trials)
                 bar.n = min(round(spent), round(budget))
@@ -252,13 +300,9 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                 if stop.signal:
                     raise Stopped(stop.signal, f"stopped after trial {done - 1}; rerun the same command to "
                                                f"continue ({out}/study.db keeps every trial)")
-                try:
-                    study.optimize(objective, n_trials=1, catch=())
-                except Exception as e:  # SQLite's own words for a full disk, through SQLAlchemy
-                    if "disk is full" in str(e) or "disk I/O error" in str(e):
-                        raise SasmiError(f"{out}/study.db: cannot write (the disk is full); free some space and "
-                                         "rerun the same command to continue") from None
-                    raise
+                with full_disk_named(out):
+                    width_now = width if cfg.trials is None else min(width, cfg.trials - done)
+                    _batch(study, preset, cfg, run, width_now)
         stop.restore()
         final = replace(cfg, seed=cfg.seed + 1)
         best_raw = best_valid(study, preset, cfg, final)
@@ -271,3 +315,29 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         lock.release()
     return out
 
+
+def _batch(study, preset: Preset, cfg: CalibrateConfig, run, width: int) -> None:
+    """`width` trials asked, scored together and told; their wall time is added to the search time."""
+    from sasmi.realism.calibration_report import searched_seconds
+
+    start = time.perf_counter()
+    trials = [study.ask() for _ in range(width)]
+    scores = run([apply(preset.raw, _suggest(t, cfg.params)) for t in trials])
+    for trial, s in zip(trials, scores):
+        for key, value in s.items():
+            if key != "objective":
+                trial.set_user_attr(key, value)
+        study.tell(trial, s["objective"])
+    study.set_user_attr("seconds", searched_seconds(study) + time.perf_counter() - start)
+
+
+@contextlib.contextmanager
+def full_disk_named(out: Path) -> Iterator[None]:
+    """SQLite's own words for a full disk, through SQLAlchemy, as one line naming the study."""
+    try:
+        yield
+    except Exception as e:
+        if "disk is full" in str(e) or "disk I/O error" in str(e):
+            raise SasmiError(f"{out}/study.db: cannot write (the disk is full); free some space and rerun the "
+                             "same command to continue") from None
+        raise

@@ -164,7 +164,23 @@ def test_a_full_disk_under_the_study_is_one_line(known, tmp_path, monkeypatch):
         raise sqlalchemy.exc.OperationalError("INSERT", {}, Exception("database or disk is full"))
 
     real, start = known
-    monkeypatch.setattr(optuna.study.Study, "optimize", full)
+    monkeypatch.setattr(optuna.study.Study, "tell", full)
     with pytest.raises(SasmiError, match="study.db: cannot write \\(the disk is full\\); free some space"):
         calibrate(real, start, CalibrateConfig(params=("post.gain",), trials=3, chips=16, size=64), tmp_path / "run",
                   progress=False)
+
+
+def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
+    """--workers 2: trials scored side by side on a local Dask cluster, each worker with its own φ and share
+    of the cores; the start preset's trial scores as it does here."""
+    import optuna
+
+    real, start = known
+    scores = {}
+    for workers in (1, 2):
+        cfg = CalibrateConfig(params=("post.gain",), trials=4, chips=16, size=64, final_chips=16, workers=workers)
+        out = calibrate(real, start, cfg, tmp_path / f"run{workers}", progress=False)
+        study = optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}")
+        assert len(study.trials) == 4 and all(t.value is not None for t in study.trials)
+        scores[workers] = study.trials[0].value
+    assert scores[2] == pytest.approx(scores[1], rel=1e-6)
