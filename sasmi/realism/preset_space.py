@@ -173,7 +173,7 @@ def apply(raw: dict, values: dict[str, float]) -> dict:
         field = name[:-len(".spread")]
         if name.endswith(".spread") and field not in values:
             section, key = field.split(".")
-            raw[section][key] = _with_centre_and_spread(_field(raw, section, key), centre(_field(raw, section, key)),
+            raw.setdefault(section, {})[key] = _with_centre_and_spread(_field(raw, section, key), centre(_field(raw, section, key)),
                                                         s, KNOBS[field])
     sonar = raw["sonar"]
     far = max(_ends(_field(raw, "sonar", "near_range"))) + max(_ends(_field(raw, "sonar", "chip_size")))

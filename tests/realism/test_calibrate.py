@@ -60,6 +60,7 @@ def test_spread_only_keeps_the_centre():
     raw = load_preset("cylinder_chip").raw
     moved = apply(raw, {"seafloor.albedo.spread": 0.0})
     assert moved["seafloor"]["albedo"] == pytest.approx(0.35)
+    assert apply({}, {"post.gain.spread": 0.3})["post"]["gain"] == {"uniform": [0.315, 0.585]}  # the default 0.45
 
 
 def test_unknown_and_repeated_knobs_are_refused():
