@@ -7,7 +7,8 @@ scores them against the real chips:
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
 
 d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1
-passes; the 4 target sizes count only where most real chips show a target), and the φ-FID ratio is the
+passes; the 4 target sizes, the share of chips with a target and the shadow level count only where
+most real chips show a target), and the φ-FID ratio is the
 renders' FID to the real chips in the shipped φ over that of as many real chips to the rest (1: as close as real chips are to each other). The first term pins what the
 statistics measure (shadow and highlight sizes in px, gray levels, speckle), the second the whole
 distribution of looks. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
@@ -28,7 +29,7 @@ from typing import Iterator
 
 import numpy as np
 
-from sasmi.chips.compare import TOLERANCES
+from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
 from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
@@ -39,6 +40,7 @@ from sasmi.scene.preset import Preset, load_preset
 SAMPLERS = ("cmaes", "tpe")
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
 FAILED = 1e3  # objective of a knob setting that makes no valid preset
+OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
 ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
 
 
@@ -98,9 +100,9 @@ def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 1
         order = rng.permutation(len(phi))
         reference.append(fid(phi[order[:cfg.chips]], phi[order[cfg.chips:]]))
     targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
-    checked = tuple(k for k in TOLERANCES if targets or k not in MASK_STATISTICS)
-    return RealChips(Path(folder), {k: s["median"] for k, s in stats["summary"].items()}, checked, phi,
-                     float(np.mean(reference)), images)
+    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
+    values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
+    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), images)
 
 
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
@@ -112,11 +114,13 @@ def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) ->
 
 
 def medians(images: np.ndarray) -> dict[str, float]:
+    """Every statistic's median over the chips where it is found, and the share of chips with a target."""
     rows = [image_statistics(im) for im in images]
     out = {}
     for k in STATISTICS:
         v = np.array([r[k] for r in rows])
         out[k] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else math.nan
+    out["targets_found"] = float(np.mean([math.isfinite(r["shadow_length"]) for r in rows]))
     return out
 
 
@@ -126,11 +130,12 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float) -> di
     from sasmi.eval.metrics import fid
 
     ours = medians(images)
-    distances = {k: TOLERANCES[k].distance(real.medians[k], ours[k]) for k in real.checked}
+    distances = {k: OBJECTIVE[k].distance(real.medians[k], ours[k]) for k in real.checked}
     ratio = fid(phi_features(encoder, images), real.phi) / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
     return {"objective": stats_term + phi_weight * ratio, "statistics": stats_term, "phi_ratio": ratio,
-            "passed": sum(d <= 1 for d in distances.values()), "distances": distances, "medians": ours}
+            "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES), "distances": distances,
+            "medians": ours}
 
 
 def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
