@@ -19,14 +19,17 @@ seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_
 seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
 post.speckle_cell_track,post.noise_std,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
 
-$SASMI split $DATA --seed 0 --out "$RUNS/split"
+[ -d "$RUNS/split" ] || $SASMI split $DATA --seed 0 --out "$RUNS/split"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --out "$RUNS/calibrate-muscle"
 $SASMI render "$RUNS/calibrate-muscle/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-muscle/renders"
 $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/cylinder-renders" --check || true
+$SASMI render muscle_paper --count 400 --size 128 --out "$RUNS/muscle-renders"
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/cylinder-renders" \
+    "$RUNS/muscle-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-muscle/evaluate" \
-    --set calibrated="$RUNS/calibrate-muscle/renders" --set cylinder_chip="$RUNS/cylinder-renders"
+    --set calibrated="$RUNS/calibrate-muscle/renders" --set cylinder_chip="$RUNS/cylinder-renders" \
+    --set muscle_paper="$RUNS/muscle-renders"
 
 # one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
 .venv/bin/python - "$DATA" "$RUNS/$SONAR" "$SONAR" <<'PY'
@@ -44,7 +47,7 @@ with open(f"{out}/MANIFEST.csv", "w", newline="") as f:
     writer.writerows(rows)
 print(f"{len(rows)} {sonar} chips in {out}")
 PY
-$SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
+[ -d "$RUNS/$SONAR-split" ] || $SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
     --chips 16 --minutes "$MINUTES" --out "$RUNS/calibrate-$SONAR"
 $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
