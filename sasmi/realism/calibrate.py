@@ -131,20 +131,20 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float) -> di
 
     ours = medians(images)
     distances = {k: OBJECTIVE[k].distance(real.medians[k], ours[k]) for k in real.checked}
-    ratio = fid(phi_features(encoder, images), real.phi) / real.phi_reference
+    features = phi_features(encoder, images)
+    ratio = fid(features, real.phi) / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
     return {"objective": stats_term + phi_weight * ratio, "statistics": stats_term, "phi_ratio": ratio,
             "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES), "distances": distances,
-            "medians": ours}
+            "medians": ours, "features": features}
 
 
 def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
     """`score` with the φ-FID ratio of `sasmi evaluate` (matched sizes, 200 real splits): the report's figure."""
-    from sasmi.eval.features import phi_features
     from sasmi.eval.metrics import fid_ratio_matched
 
     s = score(images, real, encoder, cfg.phi_weight)
-    ratio = fid_ratio_matched(phi_features(encoder, images), real.phi, 200, cfg.seed)
+    ratio = fid_ratio_matched(s["features"], real.phi, 200, cfg.seed)
     return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std}
 
 

@@ -69,8 +69,10 @@ def objective_figure(study, path: Path) -> None:
     ax.plot(minutes, np.minimum.accumulate(values), color="C0", label="best so far")
     ax.set(xlabel="minutes since the first trial", ylabel="objective", yscale="log", title="objective")
     ax.legend()
-    best = np.minimum.accumulate(values)
-    passes = [next(t.user_attrs.get("passed", 0) for t in done if t.value == b) for b in best]
+    passes, best = [], 0
+    for i, value in enumerate(values):  # the statistics passed by the best trial so far
+        best = i if value < values[best] else best
+        passes.append(done[best].user_attrs.get("passed", 0))
     ax_pass.step(minutes, passes, where="post")
     ax_pass.set(xlabel="minutes since the first trial", ylabel="statistics",
                 title="best trial: statistics within tolerance", ylim=(0, len(TOLERANCES) + 0.5))

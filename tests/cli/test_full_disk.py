@@ -47,6 +47,16 @@ def _no_temporary_files(folder: Path) -> None:
     assert not [p for p in folder.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]
 
 
+def _fails_when_the_disk_fills(monkeypatch, capsys, command: list[str], out: Path, k: int) -> None:
+    """`command` into `out` with the disk full at the k-th rename: one line, exit 2, no temporary file left."""
+    seen = _disk_full_at(monkeypatch, out, k)
+    assert main([*command, "--out", str(out)]) == 2
+    _one_line_no_space(capsys)
+    _no_temporary_files(out)
+    assert len(seen) == k
+    monkeypatch.undo()
+
+
 @pytest.mark.slow
 def test_generate_and_export_on_a_full_disk(tmp_path, monkeypatch, capsys):
     args = ["generate", PRESET, "--count", "6", "--spp", "2", "--batch", "2"]
@@ -55,12 +65,7 @@ def test_generate_and_export_on_a_full_disk(tmp_path, monkeypatch, capsys):
     capsys.readouterr()
 
     out = tmp_path / "cut"
-    seen = _disk_full_at(monkeypatch, out, 9)  # in the middle of the chips
-    assert main([*args, "--out", str(out)]) == 2
-    _one_line_no_space(capsys)
-    _no_temporary_files(out)
-    assert len(seen) == 9
-    monkeypatch.undo()
+    _fails_when_the_disk_fills(monkeypatch, capsys, args, out, 9)  # in the middle of the chips
     assert main([*args, "--out", str(out)]) == 0  # the rerun completes the set
     assert _files(out) == _files(tmp_path / "whole")
 
@@ -108,12 +113,8 @@ def test_translate_on_a_full_disk(tmp_path, monkeypatch, capsys, render_set):
     assert main([*args, "--out", str(tmp_path / "whole")]) == 0
     capsys.readouterr()
     out = tmp_path / "cut"
-    seen = _disk_full_at(monkeypatch, out, 4)  # in the middle of the chips
-    assert main([*args, "--out", str(out)]) == 2
-    _one_line_no_space(capsys)
-    _no_temporary_files(out)
-    assert len(seen) == 4 and not (out / "translate.json").exists()
-    monkeypatch.undo()
+    _fails_when_the_disk_fills(monkeypatch, capsys, args, out, 4)  # in the middle of the chips
+    assert not (out / "translate.json").exists()
     assert main([*args, "--out", str(out)]) == 0  # the rerun completes the set
     cut, whole = _files(out), _files(tmp_path / "whole")
     assert cut.keys() == whole.keys() and all(cut[k] == whole[k] for k in cut if k != "translate.json")
