@@ -9,7 +9,8 @@ file's SHA-256 with the shipped one (exit 1 if one differs). Rerunning resumes: 
 is kept. Another --chips (a split's train side) trains the same recipe on those chips alone.
 
 1. phi     the φ autoencoder on every chip (targets and seafloor of every sonar)
-2. seabeds the seabed statistics of the seafloor chips of the targets' sonar (sasmi.realism.seabeds)
+2. seabeds the seabed statistics of the seafloor chips of the targets' sonar, the speckle of the
+           target chips' floors (sasmi.realism.seabeds)
 3. renders the default preset, 400 chips at 128 px
 4. floors  their targets on floors drawn from those seabeds (what `sasmi generate` lays them on)
 5. sasgan  the SAS GAN, the default recipe, on every target chip
@@ -91,7 +92,8 @@ def main() -> int:
     phi = trained(AUTOENCODER, out / "phi", {"steps": steps["phi"], "size": size, "seed": SEED}, {"real": args.chips})
     print("2/5 seabeds", flush=True)
     weights = out / "weights"
-    seabeds = save_seabeds(fit_seabeds(sonar_floors(args.chips, out / "floors")), weights / FILES["seabeds"], about)
+    seabeds = save_seabeds(fit_seabeds(sonar_floors(args.chips, out / "floors"), args.chips / "targets"),
+                           weights / FILES["seabeds"], about)
     print("3/5 renders", flush=True)
     render_set(RenderJob(preset=load_preset(PRESET), out=out / "renders", count=count, seed=SEED, size=size))
     print("4/5 renders on drawn floors", flush=True)

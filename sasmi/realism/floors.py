@@ -16,8 +16,8 @@ kept (FLOOR_CHOICES), and renders draw their floors from that list. Each floor i
 one chip of that list under the speckle of another, with the slow gain swings along track that
 real swaths show (`fresh_floor`).
 
-Without real floor chips, `seabed_floor` keeps the render's own speckle and gives it a seabed
-drawn from real floors' seabed statistics (sasmi.realism.seabeds; the shipped `seabeds.pt`).
+Without real floor chips, `seabed_floor` draws a floor from real floors' statistics: a seabed and
+a speckle of the real sonar's grain and gray levels (sasmi.realism.seabeds; the shipped `seabeds.pt`).
 """
 from __future__ import annotations
 
@@ -146,29 +146,22 @@ def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Gene
     return np.clip(seabed * np.roll(speckle, shift, axis=0), 0.0, 1.0).astype(np.float32)
 
 
-def render_speckle(render01: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """(H, W): a render's floor over its seabed, the seabed blurred from floor pixels alone so that no
-    target or shadow darkens or lights the floor beside it; 1 on the target and shadow."""
-    floor = (mask == 0).astype(np.float64)
-    seabed = ndimage.gaussian_filter(render01 * floor, SEABED) / np.maximum(ndimage.gaussian_filter(floor, SEABED), 1e-6)
-    return np.where(mask == 0, render01 / (seabed + 1e-3), 1.0)
-
-
 def seabed_floor(seabeds, render01: np.ndarray, mask: np.ndarray, seed: int, index: int) -> np.ndarray:
-    """(H, W) in [0, 1]: chip `index`'s floor, the render's speckle (`render_speckle`) over a seabed drawn from
-    `seabeds` (sasmi.realism.seabeds) with gain bands, from a stream seeded by (seed, index) alone."""
-    from sasmi.realism.seabeds import draw_seabed
+    """(H, W) in [0, 1]: chip `index`'s floor, drawn from `seabeds` (sasmi.realism.seabeds.draw_floor) from a
+    stream seeded by (seed, index) alone. The render gives only its shape: its own speckle, which no real sonar
+    made, is replaced as a real floor chip replaces it. No gain bands: a drawn seabed keeps its source's swings
+    along track, and bands on top swing half as much again as real target chips do (`sasmi stats`)."""
+    from sasmi.realism.seabeds import draw_floor
 
-    rng = np.random.default_rng([seed, index])
-    seabed = draw_seabed(seabeds, render01.shape, rng) * gain_bands(render01.shape[0], rng)[:, None]
-    return np.clip(seabed * render_speckle(render01.astype(np.float64), mask), 0.0, 1.0).astype(np.float32)
+    floor = draw_floor(seabeds, render01.shape, np.random.default_rng([seed, index]))
+    return np.clip(floor, 0.0, 1.0).astype(np.float32)
 
 
 def seabed_floor_label(label: ChipLabel, seabeds, seed: int, index: int) -> ChipLabel:
-    """A render's label for its composite on `seabed_floor`: all of it holds (the render's rocks stay in its
-    speckle), and the seabeds file and the stream are recorded."""
+    """A render's label for its composite on `seabed_floor`: the geometry holds, the rendered floor's rocks are
+    gone with its speckle (as on a real floor chip, `floor_label`), and the seabeds file and the stream are recorded."""
     floor = {"seabeds": seabeds.path and str(seabeds.path), "seabed_stream": [seed, index]}
-    return replace(label, extra={**label.extra, "floor": floor})
+    return replace(label, clutter=(), extra={**label.extra, "floor": floor})
 
 
 def _draw(choices: list[Path], seed: int, index: int) -> tuple[np.random.Generator, Path, Path, bool]:

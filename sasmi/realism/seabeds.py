@@ -1,13 +1,19 @@
-"""Real-like seabeds without real chips: a real floor's seabed spectrum under fresh random phases.
+"""Real-like floors without real chips: a real floor's seabed and speckle spectra under fresh random phases.
 
 A floor chip blurred over SEABED px is its seabed (sasmi.realism.floors): its patches, bands,
 ripples and range profile. Seen at COARSE px, the log of a seabed is its mean, its range profile
 (the mean of each range column) and a field whose Fourier amplitudes say how rough it is at each
 scale and in each direction. Drawing that field's phases afresh makes a new seabed of the same
-character that is no real chip (phase randomisation, Theiler et al. 1992). A seabeds file keeps,
-for each seafloor chip, the mean, the profile and the amplitudes: statistics, no image. The
-shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds those of the seafloor chips of the
-shared target chips' sonar, so that `sasmi generate` lays renders on real-like floors anywhere.
+character that is no real chip (phase randomisation, Theiler et al. 1992). What is left of the
+chip over its seabed is its speckle: its grain (power spectrum) and its gray levels (quantiles)
+are the sonar's, and a render's speckle has neither, which a small classifier sees at once
+(docs/gan.md, *Drawn floors*). A speckle of both is drawn by iterating between the two
+(IAAFT, Schreiber & Schmitz 1996). A seabeds file keeps, for each seafloor chip, the mean, the
+profile and the amplitudes, and for each chip that lends its speckle (those floor chips, or target
+chips' floors) the smoothed power spectrum and quantiles: statistics, no image. The shipped one
+(sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds of the seafloor chips of the shared
+target chips' sonar and the speckle of those target chips' floors, so that `sasmi generate` lays
+renders on real-like floors anywhere.
 """
 from __future__ import annotations
 
@@ -23,7 +29,14 @@ from sasmi.images import list_images
 
 COARSE = 32      # px: a seabed (blurred over SEABED px at 128) keeps nothing finer than this grid shows
 SEABED = 4.0     # px at 128: as sasmi.realism.floors.SEABED
+SPECKLE = 128    # px: speckle is drawn at the real chips' size; its power spectrum is kept on half that grid
+LEVELS = 257     # quantiles of the speckle's gray levels
+IAAFT_ROUNDS = 10  # spectrum and levels agree to a few per cent after this many (Schreiber & Schmitz 1996)
+# rows either side of a target chip's centre row left out of its speckle: target chips are cut centred on the
+# target along track, and its highlight and shadow span at most this many rows at 128 px (`sasmi stats`)
+TARGET_ROWS = 24
 KIND = "seabeds"
+TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels")
 
 
 @dataclass(frozen=True)
@@ -31,7 +44,16 @@ class Seabeds:
     mean: np.ndarray        # (N,) each chip's mean log seabed
     profile: np.ndarray     # (N, COARSE) its log seabed's range profile, less the mean
     amplitude: np.ndarray   # (N, COARSE, COARSE // 2 + 1) |rfft2| of the rest
+    speckle_power: np.ndarray   # (M, SPECKLE // 2, SPECKLE // 4 + 1) a speckle's power spectrum, smoothed, no mean
+    speckle_levels: np.ndarray  # (M, LEVELS) its quantiles; M: the floor chips, or the target chips' floors
     path: Path | None = None
+
+    def shapes_agree(self) -> bool:
+        n, m = len(self.mean), len(self.speckle_levels)
+        return (self.mean.ndim == 1 and n > 0 and m > 0 and self.profile.shape == (n, COARSE)
+                and self.amplitude.shape == (n, COARSE, COARSE // 2 + 1)
+                and self.speckle_power.shape == (m, SPECKLE // 2, SPECKLE // 4 + 1)
+                and self.speckle_levels.shape == (m, LEVELS))
 
 
 def log_seabed(chip01: np.ndarray) -> np.ndarray:
@@ -45,32 +67,106 @@ def log_seabed(chip01: np.ndarray) -> np.ndarray:
     return np.log(coarse[0, 0].numpy())
 
 
-def fit_seabeds(floors: str | os.PathLike) -> Seabeds:
-    """The Seabeds of every floor chip in a folder."""
+def speckle_of(chip01: np.ndarray) -> np.ndarray:
+    """(H, W): a floor chip (in [0, 1], SPECKLE px) over its seabed, as sasmi.realism.floors.fresh_floor splits it."""
+    return chip01 / (ndimage.gaussian_filter(chip01.astype(np.float64), SEABED) + 1e-3)
+
+
+def _resized(x: np.ndarray, shape: tuple[int, int], mode: str, align_corners: bool = False) -> np.ndarray:
+    import torch
+    import torch.nn.functional as F
+
+    return F.interpolate(torch.from_numpy(np.ascontiguousarray(x))[None, None], size=shape, mode=mode,
+                         **({"align_corners": align_corners} if mode == "bilinear" else {}))[0, 0].numpy()
+
+
+def speckle_spectrum(speckle: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """(SPECKLE // 2, SPECKLE // 4 + 1): the power spectrum of the speckle's pixels where `keep`, less their mean,
+    smoothed (one chip's is noise) and kept on half the grid: its grain, in a quarter the numbers.
+
+    It is the transform of their autocorrelation, each lag averaged over the pixel pairs both kept
+    (Blackman-Tukey: lags out to half the chip, tapered), so that rows left out bias no lag.
+    """
+    h, w = speckle.shape
+    x = np.where(keep, speckle - speckle[keep].mean(), 0.0)
+    pairs = np.fft.irfft2(np.abs(np.fft.rfft2(keep.astype(np.float64), s=(2 * h, 2 * w))) ** 2, s=(2 * h, 2 * w))
+    sums = np.fft.irfft2(np.abs(np.fft.rfft2(x, s=(2 * h, 2 * w))) ** 2, s=(2 * h, 2 * w))
+    rows, cols = np.r_[0:h // 2, -(h // 2):0], np.r_[0:w // 2, -(w // 2):0]   # lags, in FFT order
+    acf = (sums / np.maximum(pairs, 1.0))[np.ix_(rows % (2 * h), cols % (2 * w))]
+    taper = np.outer(1 - np.abs(rows) / (h // 2), 1 - np.abs(cols) / (w // 2))  # Bartlett: a power >= 0
+    power = np.maximum(np.fft.rfft2(acf * taper).real, 0.0)
+    smooth = ndimage.uniform_filter(power, 3, mode="wrap")
+    return _resized(smooth, (SPECKLE // 2, SPECKLE // 4 + 1), "area")
+
+
+def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    speckles = [speckle_of(chip) for chip in chips]
+    return (np.stack([speckle_spectrum(s, keep) for s in speckles]),
+            np.stack([np.quantile(s[keep], np.linspace(0.0, 1.0, LEVELS)) for s in speckles]))
+
+
+def fit_seabeds(floors: str | os.PathLike, targets: str | os.PathLike | None = None) -> Seabeds:
+    """The Seabeds of every floor chip in a folder; the speckle of the target chips of `targets` where given.
+
+    A sonar's target chips and seafloor chips may be cut from different images, whose floors'
+    speckle differs (the shared MILCO seafloor chips show fewer looks and a brighter tail than the
+    floors of its target chips): chips of targets must match the floors of target chips. A target
+    chip's speckle is taken from its rows clear of the target (TARGET_ROWS).
+    """
     from sasmi.preprocess import load_image
 
-    paths = list_images(floors)
-    if not paths:
-        raise SasmiError(f"{floors}: no image (png, jpg, tif, tiff, npy) in it")
-    logs = np.stack([log_seabed(load_image(p, 128)) for p in paths])              # (N, C, C)
+    def chips_of(folder) -> list[np.ndarray]:
+        paths = list_images(folder)
+        if not paths:
+            raise SasmiError(f"{folder}: no image (png, jpg, tif, tiff, npy) in it")
+        return [load_image(p, SPECKLE).astype(np.float64) for p in paths]
+
+    chips = chips_of(floors)
+    logs = np.stack([log_seabed(chip) for chip in chips])                         # (N, C, C)
     mean = logs.mean(axis=(1, 2))
     profile = logs.mean(axis=1) - mean[:, None]                                    # (N, C): per range column
     rest = logs - mean[:, None, None] - profile[:, None, :]
-    return Seabeds(mean, profile, np.abs(np.fft.rfft2(rest)))
+    keep = np.ones((SPECKLE, SPECKLE), bool)
+    if targets is not None:
+        keep[SPECKLE // 2 - TARGET_ROWS:SPECKLE // 2 + TARGET_ROWS] = False
+    return Seabeds(mean, profile, np.abs(np.fft.rfft2(rest)),
+                   *_speckle_tables(chips if targets is None else chips_of(targets), keep))
 
 
 def draw_seabed(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """(H, W) > 0: a new seabed, one chip's mean, profile and amplitudes under random phases, at `shape`."""
-    import torch
-    import torch.nn.functional as F
-
     k = int(rng.integers(len(seabeds.mean)))
     # the phases of white noise's transform: random, and exactly those of a real field
     phase = np.angle(np.fft.rfft2(rng.standard_normal((COARSE, COARSE))))
     rest = np.fft.irfft2(seabeds.amplitude[k] * np.exp(1j * phase), s=(COARSE, COARSE))
     log = seabeds.mean[k] + seabeds.profile[k][None, :] + rest
-    fine = F.interpolate(torch.from_numpy(np.exp(log))[None, None], size=shape, mode="bilinear", align_corners=False)
-    return ndimage.gaussian_filter(fine[0, 0].numpy(), SEABED * shape[0] / 128)
+    fine = _resized(np.exp(log), shape, "bilinear")
+    return ndimage.gaussian_filter(fine, SEABED * shape[0] / 128)
+
+
+def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.ndarray:
+    """(SPECKLE, SPECKLE) > 0: a new speckle with chip `chip`'s grain and gray levels (IAAFT from shuffled levels)."""
+    power = _resized(seabeds.speckle_power[chip], (SPECKLE, SPECKLE // 2 + 1), "bilinear", align_corners=True)
+    amplitude = np.sqrt(np.maximum(power, 0.0))
+    amplitude[0, 0] = 0.0  # the mean is the levels' to set
+    levels = np.interp(np.linspace(0.0, 1.0, SPECKLE * SPECKLE), np.linspace(0.0, 1.0, LEVELS),
+                       seabeds.speckle_levels[chip])
+    x = rng.permutation(levels).reshape(SPECKLE, SPECKLE)
+    for _ in range(IAAFT_ROUNDS):
+        phase = np.angle(np.fft.rfft2(x))
+        x = np.fft.irfft2(amplitude * np.exp(1j * phase), s=x.shape)
+        x = levels[np.argsort(np.argsort(x, axis=None))].reshape(x.shape)  # the levels back, in x's order
+    return x
+
+
+def draw_floor(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """(H, W) >= 0: a drawn seabed under a drawn speckle, each of a chip drawn at random, at `shape` (speckle
+    drawn at SPECKLE px, area-averaged or interpolated to `shape` as real chips are when loaded)."""
+    seabed = draw_seabed(seabeds, shape, rng)
+    speckle = draw_speckle(seabeds, int(rng.integers(len(seabeds.speckle_levels))), rng)
+    if speckle.shape != tuple(shape):
+        speckle = _resized(speckle, shape, "area" if shape[0] < SPECKLE else "bilinear")
+    return seabed * speckle
 
 
 def save_seabeds(seabeds: Seabeds, out: str | os.PathLike, about: dict | None = None) -> Path:
@@ -83,7 +179,7 @@ def save_seabeds(seabeds: Seabeds, out: str | os.PathLike, about: dict | None = 
 
     data = {"format": FORMAT, "sasmi": __version__, "kind": KIND, "about": about or {},
             "state": {name: torch.from_numpy(np.ascontiguousarray(getattr(seabeds, name), dtype=np.float32))
-                      for name in ("mean", "profile", "amplitude")}}
+                      for name in TABLES}}
     return write_torch(out, data)
 
 
@@ -106,13 +202,10 @@ def load_seabeds(path: str | os.PathLike) -> Seabeds:
         raise SasmiError(f"{path}: seabeds format {data.get('format')!r}; this sasmi reads format {FORMAT} "
                          f"(written by {data.get('sasmi', 'another version')})")
     try:
-        state = {k: data["state"][k].double().numpy() for k in ("mean", "profile", "amplitude")}
-        seabeds = Seabeds(**state, path=path)
-        ok = (seabeds.mean.ndim == 1 and len(seabeds.mean) > 0
-              and seabeds.profile.shape == (len(seabeds.mean), COARSE)
-              and seabeds.amplitude.shape == (len(seabeds.mean), COARSE, COARSE // 2 + 1))
+        state = {k: data["state"][k].double().numpy() for k in TABLES}
+        ok = Seabeds(**state, path=path).shapes_agree()
     except (KeyError, TypeError, AttributeError):
         ok = False
     if not ok:
-        raise SasmiError(f"{path}: its seabeds tables are missing or of the wrong shape")
-    return seabeds
+        raise SasmiError(f"{path}: its seabeds tables are missing or of the wrong shape (tables {', '.join(TABLES)})")
+    return Seabeds(**state, path=path)
