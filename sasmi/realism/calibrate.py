@@ -274,7 +274,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     from sasmi.eval.features import as_encoder, describe_phi
     from sasmi.gan.loop import StopSignals
     from sasmi.images import FolderLock
-    from sasmi.realism.calibration_report import searched_seconds, write_report
+    from sasmi.realism.calibration_report import searched_seconds, sensitivity, write_report
 
     cfg = cfg.validate()
     out = Path(out)
@@ -311,11 +311,13 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         stop.restore()
         final = replace(cfg, seed=cfg.seed + 1)
         best_raw = best_valid(study, preset, cfg, final)
+        pins = sensitivity(study.trials[study.user_attrs["calibrated_trial"]].params, lambda values: trial_score(
+            apply(preset.raw, values), preset.path, real, cfg, encoder)["objective"])
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)
             shown[name] = (images, final_score(images, real, encoder, cfg))
-        write_report(out, record, cfg, preset, best_raw, real, study, shown)
+        write_report(out, record, cfg, preset, best_raw, real, study, shown, pins)
     finally:
         lock.release()
     return out

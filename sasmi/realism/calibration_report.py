@@ -17,6 +17,8 @@ from sasmi.images import write_text
 from sasmi.realism.preset_space import start_values
 
 SHOWN = 6  # chips per column of the sheet
+STEP = 0.2  # each knob is moved alone by this share of its search range (on its search scale), down and up ...
+RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average
 
 
 def searched_seconds(study) -> float:
@@ -26,6 +28,39 @@ def searched_seconds(study) -> float:
 
 def _number(v: float) -> str:
     return "—" if not math.isfinite(v) else f"{v:.3g}"
+
+
+def sensitivity(best: dict[str, float], objective_of) -> dict[str, dict]:
+    """Per knob, the calibrated objective's mean rise with that knob alone moved STEP of its range down and up
+    (clipped to the range); objective_of(values) scores a setting of every knob. A knob whose moves leave the
+    objective where it was is one the chips cannot pin: any value of it scores alike."""
+    from sasmi.realism.preset_space import knob
+
+    base = objective_of(best)
+    result = {}
+    for name, value in best.items():
+        k = knob(name)
+        to, back = (math.log, math.exp) if k.log else (float, float)
+        width = STEP * (to(k.high) - to(k.low))
+        moved = [min(max(back(to(max(value, k.low)) + sign * width), k.low), k.high) for sign in (-1, 1)]
+        rise = float(np.mean([objective_of({**best, name: m}) - base for m in moved]))
+        result[name] = {"moved": moved, "rise": rise, "share": rise / max(base, 1e-12),
+                        "pinned": rise >= RISE * base}
+    return result
+
+
+def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str]:
+    loose = [n for n, p in pins.items() if not p["pinned"]]
+    lines = [f"**What the chips pin.** Each knob moved alone by {STEP:.0%} of its search range, down and up, from "
+             f"the calibrated preset (the search's scenes): the chips pin it when the objective rises by "
+             f"{RISE:.0%} or more. " + (f"These they cannot pin, any value scoring alike: {', '.join(loose)}. "
+                                        if loose else "They pin every knob alone. ")
+             + "Knobs that trade against each other (altitude against range, gain against albedo) each look "
+               "pinned alone; their calibrated values are one of many.", "",
+             "| knob | calibrated | moved to | objective rise | pinned |", "|---|---|---|---|---|"]
+    lines += [f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
+              f"{p['share']:+.0%} | {'yes' if p['pinned'] else '**no**'} |" for n, p in pins.items()]
+    return lines
 
 
 def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str, float]) -> str:
@@ -102,8 +137,12 @@ def sheet_figure(real, shown: dict, path: Path) -> None:
     save_figure(fig, path)
 
 
-def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict) -> None:
+def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict,
+                 pins: dict[str, dict]) -> None:
+    import json
+
     best = study.trials[study.user_attrs["calibrated_trial"]]
+    write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
     write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params))
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
@@ -118,6 +157,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"φ-FID ratio to the real chips (1 = as close as real chips to each other): start {ratio['start']}, "
         f"calibrated {ratio['calibrated']}.", "",
         *statistics_table(real, shown), "",
+        *sensitivity_lines(pins, best.params), "",
         "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
         "search: `objective.png`.", "",
         "![sheet](sheet.png)", "", "![objective](objective.png)", "",

@@ -2,6 +2,8 @@
 recovers a known preset's gain from its own renders, continues when rerun and refuses other settings."""
 from __future__ import annotations
 
+import json
+
 import math
 import subprocess
 import sys
@@ -132,6 +134,7 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     report = (out / "report.md").read_text()
     assert "post.gain: 0.75 ->" in (out / "preset.toml").read_text()
     assert "25 trials" in report and (out / "sheet.png").is_file() and (out / "objective.png").is_file()
+    assert "| post.gain | 0.3" in report and json.loads((out / "sensitivity.json").read_text())["post.gain"]["pinned"]
 
     import optuna
 
@@ -185,3 +188,22 @@ def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
         assert len(study.trials) == 4 and all(t.value is not None for t in study.trials)
         scores[workers] = study.trials[0].value
     assert scores[2] == pytest.approx(scores[1], rel=1e-6)
+
+
+def test_the_report_tells_a_pinned_knob_from_one_the_chips_cannot_pin():
+    from sasmi.realism.calibration_report import sensitivity, sensitivity_lines
+
+    calls = []
+
+    def objective(values):  # sees the gain alone: every noise level scores alike
+        calls.append(values)
+        return 1.0 + math.log(values["post.gain"] / 0.3) ** 2
+
+    best = {"post.gain": 0.3, "post.noise_std": 0.05}
+    pins = sensitivity(best, objective)
+    assert len(calls) == 5 and calls[0] == best  # the calibrated setting, then each knob alone down and up
+    assert pins["post.gain"]["pinned"] and pins["post.gain"]["rise"] > 0.5
+    assert pins["post.gain"]["moved"][0] < 0.3 < pins["post.gain"]["moved"][1]
+    assert not pins["post.noise_std"]["pinned"] and pins["post.noise_std"]["rise"] == 0.0
+    assert pins["post.noise_std"]["moved"] == [pytest.approx(0.03), pytest.approx(0.07)]  # 20 % of its 0-0.1 range
+    assert "cannot pin, any value scoring alike: post.noise_std." in "\n".join(sensitivity_lines(pins, best))

@@ -127,7 +127,7 @@ def test_the_nets_own_levels_are_held_at_the_renders(tmp_path, monkeypatch):
         assert phases.generator_step()["loss/anchor"] < 1e-6  # the render itself at first
         torch.nn.init.constant_(phases.state["generator"].net[-1].bias, 1.0)  # + 1 in atanh units everywhere
         first = phases.generator_step()["loss/anchor"]
-        for _ in range(30):
+        for _ in range(60):
             last = phases.generator_step()["loss/anchor"]
         return first, last
 
