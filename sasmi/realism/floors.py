@@ -33,6 +33,7 @@ from sasmi.eval.config import PreservationConfig
 from sasmi.images import list_images, write_gray
 from sasmi.labels import ChipLabel
 from sasmi.chips.stats import chip_statistics, floor_level
+from sasmi.realism.seabeds import draw_floor, seabed_of, speckle_of
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor. far_near: seafloor chips
 # may fall off less along range than target chips, and the composites (and the GAN trained on them) keep the floor's
@@ -44,7 +45,6 @@ LIFTS = 4            # lifts of the highlight towards it: the blur mixes the unl
 # floors kept per target chip: two give the composites more floors and more recall of real targets for a
 # small phi cost, three more recall at twice the cost (docs/gan.md, *Why each part*; figures in docs/results.md)
 FLOOR_CHOICES = 2
-SEABED = 4.0         # px: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
 # gain swings along track, as a swath's gain swings from ping to ping: each floor's rows times exp(s * noise),
 # s drawn in [0, BANDS], the noise of unit spread and correlated over BAND_LENGTH px. Up to 0.1 they raise recall
 # of held-out targets at no phi cost; stronger or longer bands cost several times more (docs/gan.md, *Why each part*)
@@ -127,20 +127,17 @@ def gain_bands(rows: int, rng: np.random.Generator) -> np.ndarray:
 def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """(H, W) in [0, 1]: the seabed of one floor chip under the speckle of another, with gain bands along track.
 
-    A chip blurred over SEABED px is its seabed (patches, its range profile); the chip over that
-    seabed is its speckle, which the multiplicative model makes independent of the seabed. The
+    A chip blurred over a few px is its seabed (patches, its range profile; `seabed_of`); the chip over
+    that seabed is its speckle, which the multiplicative model makes independent of the seabed. The
     speckle moves along track by a quarter to three quarters of the chip, wrapping round: without
     it every composite is its floor chip pixel for pixel outside the target, which `sasmi
     evaluate`'s copying detector flags. Another matched chip's speckle also brings the composites
     nearer held-out real chips, and the gain bands (`gain_bands`) reach chips the floor chips alone
     do not (docs/gan.md, *Real floors*).
     """
-    def seabed_of(chip: np.ndarray) -> np.ndarray:
-        return ndimage.gaussian_filter(chip.astype(np.float64), SEABED) + 1e-3
-
     if seabed01.shape != speckle01.shape:
         raise SasmiError(f"fresh_floor: seabed chip {seabed01.shape} and speckle chip {speckle01.shape} differ")
-    speckle = speckle01.astype(np.float64) / seabed_of(speckle01)
+    speckle = speckle_of(speckle01)
     shift = int(rng.integers(speckle.shape[0] // 4, 3 * speckle.shape[0] // 4 + 1))
     seabed = seabed_of(seabed01) * gain_bands(seabed01.shape[0], rng)[:, None]
     return np.clip(seabed * np.roll(speckle, shift, axis=0), 0.0, 1.0).astype(np.float32)
@@ -151,8 +148,6 @@ def seabed_floor(seabeds, render01: np.ndarray, mask: np.ndarray, seed: int, ind
     stream seeded by (seed, index) alone. The render gives only its shape: its own speckle, which no real sonar
     made, is replaced as a real floor chip replaces it. No gain bands: a drawn seabed keeps its source's swings
     along track, and bands on top swing half as much again as real target chips do (`sasmi stats`)."""
-    from sasmi.realism.seabeds import draw_floor
-
     floor = draw_floor(seabeds, render01.shape, np.random.default_rng([seed, index]))
     return np.clip(floor, 0.0, 1.0).astype(np.float32)
 

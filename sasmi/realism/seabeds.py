@@ -1,6 +1,6 @@
 """Real-like floors without real chips: a real floor's seabed and speckle spectra under fresh random phases.
 
-A floor chip blurred over SEABED px is its seabed (sasmi.realism.floors): its patches, bands,
+A floor chip blurred over SEABED px is its seabed (`seabed_of`): its patches, bands,
 ripples and range profile. Seen at COARSE px, the log of a seabed is its mean, its range profile
 (the mean of each range column) and a field whose Fourier amplitudes say how rough it is at each
 scale and in each direction. Drawing that field's phases afresh makes a new seabed of the same
@@ -28,7 +28,7 @@ from sasmi.errors import SasmiError
 from sasmi.images import list_images
 
 COARSE = 32      # px: a seabed (blurred over SEABED px at 128) keeps nothing finer than this grid shows
-SEABED = 4.0     # px at 128: as sasmi.realism.floors.SEABED
+SEABED = 4.0     # px at 128: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
 SPECKLE = 128    # px: speckle is drawn at the real chips' size; its power spectrum is kept on half that grid
 LEVELS = 257     # quantiles of the speckle's gray levels
 IAAFT_ROUNDS = 10  # spectrum and levels agree to a few per cent after this many (Schreiber & Schmitz 1996)
@@ -67,9 +67,14 @@ def log_seabed(chip01: np.ndarray) -> np.ndarray:
     return np.log(coarse[0, 0].numpy())
 
 
+def seabed_of(chip01: np.ndarray) -> np.ndarray:
+    """(H, W) > 0: a floor chip (in [0, 1], 128 px) blurred over SEABED px: its seabed."""
+    return ndimage.gaussian_filter(chip01.astype(np.float64), SEABED) + 1e-3
+
+
 def speckle_of(chip01: np.ndarray) -> np.ndarray:
-    """(H, W): a floor chip (in [0, 1], SPECKLE px) over its seabed, as sasmi.realism.floors.fresh_floor splits it."""
-    return chip01 / (ndimage.gaussian_filter(chip01.astype(np.float64), SEABED) + 1e-3)
+    """(H, W): a floor chip (in [0, 1], 128 px) over its seabed: its speckle, under the multiplicative model."""
+    return chip01 / seabed_of(chip01)
 
 
 def _resized(x: np.ndarray, shape: tuple[int, int], mode: str, align_corners: bool = False) -> np.ndarray:
