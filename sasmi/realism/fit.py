@@ -100,6 +100,9 @@ class State:
         self.seconds[stage] = self.seconds.get(stage, 0.0) + seconds
         if done and stage not in self.done:
             self.done.append(stage)
+        self.save()
+
+    def save(self) -> None:
         write_text(self.path, json.dumps({"plan": self.plan.identity(), "minutes": self.plan.minutes,
                                           "seconds": self.seconds, "done": self.done}, indent=2) + "\n")
 
@@ -156,6 +159,7 @@ def fit(plan: FitPlan, device) -> Path:
     out = Path(plan.out)
     lock = FolderLock(out, "running sasmi fit")  # released when the process ends: one fit at a time in RUN
     try:
+        state.save()  # before any stage writes: a run killed in its first stage is still this fit's, to resume
         return _stages(plan, state, preset, gan_settings, device)
     finally:
         lock.release()

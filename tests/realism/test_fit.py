@@ -167,3 +167,71 @@ def test_fit_reports_on_the_splits_validation_chips_unless_told_otherwise(tmp_pa
     for chip in (split / "validation" / "targets").iterdir():
         chip.unlink()
     assert validation(split / "train" / "targets") == str(split / "train" / "targets")  # an empty side is no set
+
+
+def _fit_argv(tmp_path) -> list[str]:
+    real, validation = _chips(tmp_path / "real", 12, 0), _chips(tmp_path / "val", 12, 1)
+    return ["fit", "--real", str(real), "--validation", str(validation), "--minutes", "0.05", "--size", "32",
+            "--count", "8", "--preset", "cylinder_chip"]
+
+
+def _finished(out) -> bool:
+    state = json.loads((out / "fit.json").read_text())
+    return (state["done"] == ["phi", "renders", "sasgan", "translated", "report"]
+            and len(list((out / "translated" / "images").glob("*.png"))) == 8
+            and (out / "report" / "report.md").is_file())
+
+
+def _temporary_files(out) -> list:
+    return [p for p in out.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]
+
+
+def test_a_full_disk_in_any_stage_of_fit_is_one_line_and_the_rerun_finishes(tmp_path, monkeypatch, capsys):
+    """The disk fills at the first file each stage commits, one stage per run, each run resuming the last."""
+    import errno
+    import os
+
+    argv = [*_fit_argv(tmp_path), "--out", str(tmp_path / "run")]
+    real_replace = os.replace
+    for stage in ("phi", "renders", "sasgan", "translated", "report"):
+        under = str(tmp_path / "run" / stage)
+
+        def replace(src, dst, *args, **kwargs):
+            if str(dst).startswith(under):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return real_replace(src, dst, *args, **kwargs)
+
+        monkeypatch.setattr(os, "replace", replace)
+        assert main(argv) == 2, stage
+        monkeypatch.undo()
+        err = capsys.readouterr().err
+        last = err.strip().split("\r")[-1].splitlines()[-1]
+        assert "No space left on device" in last and "Traceback" not in err, err
+        assert not _temporary_files(tmp_path / "run"), stage
+        state = tmp_path / "run" / "fit.json"  # written after the first chunk of training
+        assert not state.exists() or stage not in json.loads(state.read_text())["done"], stage
+    assert main(argv) == 0
+    assert _finished(tmp_path / "run")
+
+
+def test_kill_9_inside_any_stage_of_fit_and_the_rerun_finishes(tmp_path):
+    """SIGKILL as each stage writes its first files; the same command then continues and finishes."""
+    import subprocess
+    import sys
+    import time
+
+    argv = [*_fit_argv(tmp_path), "--out", str(tmp_path / "run")]
+    out = tmp_path / "run"
+    marks = {"phi": out / "phi" / "checkpoints" / "last.pt", "renders": out / "renders" / "images",
+             "sasgan": out / "sasgan" / "checkpoints" / "last.pt", "translated": out / "translated" / "images"}
+    for stage, mark in marks.items():
+        process = subprocess.Popen([sys.executable, "-m", "sasmi", *argv], stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 120
+        while not mark.exists() and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        process.kill()
+        process.wait(timeout=60)
+        assert mark.exists(), stage
+    assert main(argv) == 0  # the lock died with the killed process: the rerun takes the folder
+    assert _finished(out)
+    assert not _temporary_files(out)
