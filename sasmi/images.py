@@ -263,24 +263,43 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
 
 class FolderLock:
     """An exclusive lock on a run folder (RUN/.lock), or a SasmiError when another process holds it. The
-    kernel drops it when its process ends, however it ends: a killed training never leaves it behind."""
+    kernel drops it when its process ends, however it ends: a killed command never leaves it held. A
+    command that ends removes the file as well, so that finished folders hold only what they made."""
 
     def __init__(self, folder: str | os.PathLike, what: str):
-        path = Path(folder) / ".lock"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.file = open(path, "a+")
-        try:
-            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self.file.seek(0)
-            holder = self.file.read().strip() or "another process"
+        self.path = Path(folder) / ".lock"
+        self.made = not self.path.parent.exists()  # removed again on release if the command wrote nothing in it
+        while True:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                self.file = open(self.path, "a+")
+            except FileNotFoundError:  # another command's release removed its empty folder in between
+                continue
+            try:
+                fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                self.file.seek(0)
+                holder = self.file.read().strip() or "another process"
+                self.file.close()
+                raise SasmiError(f"{folder}: {holder} is {what} in this folder; wait for it to end, "
+                                 f"or choose another --out") from None
+            # a holder that released between our open and our lock has removed the file we locked: lock the new one
+            try:
+                if os.stat(self.path).st_ino == os.fstat(self.file.fileno()).st_ino:
+                    break
+            except FileNotFoundError:
+                pass
             self.file.close()
-            raise SasmiError(f"{folder}: {holder} is {what} in this folder; wait for it to end, "
-                             f"or choose another --out") from None
         self.file.seek(0)
         self.file.truncate()
         self.file.write(f"sasmi (pid {os.getpid()})")
         self.file.flush()
 
     def release(self) -> None:
+        self.path.unlink(missing_ok=True)  # while still held: no other process can hold this file now
         self.file.close()  # closing drops the lock
+        if self.made:
+            try:
+                self.path.parent.rmdir()  # a command refused before its first file leaves no folder behind
+            except OSError:
+                pass  # not empty: the command's output

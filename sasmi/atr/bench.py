@@ -25,7 +25,7 @@ from sasmi.atr.pools import Pool, load_pool, same_sonar, split_folders, target_s
 from sasmi.atr.summary import paired, plot, summarise, table_markdown
 from sasmi.errors import SasmiError
 from sasmi.eval import classifier
-from sasmi.images import write_text
+from sasmi.images import FolderLock, write_text
 from sasmi.preprocess import check_size
 
 WAYS = ("real", "mixed", "alone", "pretrain")
@@ -166,6 +166,14 @@ def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(
     pools, note = load_pools(real_train, real_test, synthetic, synthetic_negatives, negatives, cfg)
     inputs = {"real_train": str(real_train), "real_test": str(real_test), "synthetic": str(synthetic),
               "synthetic_negatives": str(synthetic_negatives or ""), "negatives": str(negatives or "")}
+    lock = FolderLock(out, "running sasmi atr-bench")  # two benches in one folder would train every run twice
+    try:
+        return _bench(pools, note, inputs, out, cfg, device)
+    finally:
+        lock.release()
+
+
+def _bench(pools, note: str, inputs: dict, out: Path, cfg: AtrConfig, device) -> dict:
     runs_path = out / "runs.jsonl"
     done = _done_runs(runs_path, cfg, inputs)
     if not done:

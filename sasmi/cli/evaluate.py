@@ -62,12 +62,11 @@ def parse_sets(specs: list[str], real: Path) -> dict[str, Path]:
 
 def run(args: argparse.Namespace) -> int:
     from sasmi.eval import report as rep
-    from sasmi.eval import sweeps
     from sasmi.eval.cache import default_cache_dir
-    from sasmi.eval.config import EvalConfig, SweepConfig
+    from sasmi.eval.config import EvalConfig
     from sasmi.eval.features import as_encoder, describe_phi
-    from sasmi.eval.evaluate import StderrLog, evaluate_folders
-    from sasmi.chips.stats import median_statistics
+    from sasmi.eval.evaluate import StderrLog
+    from sasmi.images import FolderLock
 
     sets = parse_sets(args.sets, args.real)
     if (args.preset is None) != (args.generator is None):
@@ -85,6 +84,24 @@ def run(args: argparse.Namespace) -> int:
     report = rep.Report({"inputs": inputs}, (rep.Section(
         "Inputs", "\n".join(f"- {k}: `{v}`" for k, v in inputs.items() if v is not None)),))
     cache_dir = None if args.no_cache else args.cache or default_cache_dir()
+    lock = FolderLock(args.out, "evaluating")  # two evaluations into one report would mix their figures
+    try:
+        path = _evaluate(args, report, sets, encoder, cfg, log, cache_dir, device)
+    finally:
+        lock.release()
+    log(f"measured in φ: {describe_phi(encoder)}")
+    log(f"wrote {path}")
+    print(path)
+    return 0
+
+
+def _evaluate(args, report, sets, encoder, cfg, log, cache_dir, device) -> Path:
+    from sasmi.chips.stats import median_statistics
+    from sasmi.eval import report as rep
+    from sasmi.eval import sweeps
+    from sasmi.eval.config import SweepConfig
+    from sasmi.eval.evaluate import evaluate_folders
+
     report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log, cache_dir,
                                statistics=functools.partial(median_statistics, size=encoder.image_size))
     if args.preset is None:
@@ -95,8 +112,4 @@ def run(args: argparse.Namespace) -> int:
                                               device)
     for warning in report.metrics["warnings"]:
         print(f"sasmi evaluate: warning: {warning}", file=sys.stderr)
-    path = rep.write_report(args.out, report)
-    log(f"measured in φ: {describe_phi(encoder)}")
-    log(f"wrote {path}")
-    print(path)
-    return 0
+    return rep.write_report(args.out, report)

@@ -228,3 +228,16 @@ def test_a_mesh_keeps_its_class_id_in_every_set_of_one_preset(tmp_path):
     two = render_set(RenderJob(preset=preset, out=tmp_path / "two", count=both, size=32, spp=2), progress=False)
     assert RenderSet(one).categories == RenderSet(two).categories
     assert RenderSet(one).categories[-2:] == ["cube_a", "drum_b"]
+
+
+def test_a_second_bench_in_a_busy_folder_is_refused_in_one_line(tmp_path, capsys):
+    from sasmi.images import FolderLock
+
+    out = tmp_path / "bench"
+    held = FolderLock(out, "running sasmi atr-bench")  # as another bench would hold it
+    capsys.readouterr()
+    assert main([*_toy_bench(tmp_path, np.random.default_rng(0)), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is running sasmi atr-bench in this folder" in err, err
+    assert sorted(p.name for p in out.iterdir()) == [".lock"]  # not a run trained
+    held.release()
