@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 @dataclass(frozen=True)
 class TwoSampleConfig:
     folds: int = 5  # each fold is held out once; the others train the classifier
-    repeats: int = 2  # fold assignments drawn anew: the spread is over folds x repeats
+    repeats: int = 2  # fold assignments drawn anew: the spread is over folds x repeats ...
+    one_repeat_from: int = 250  # ... but one from this many chips a side, whose held-out folds pin each AUC to ~0.03
     epochs: int = 20  # passes over the training folds: enough for the small CNN to find a signature ...
     max_steps: int = 300  # ... in at most this many batches (a large set needs fewer passes)
     batch: int = 32  # half real, half generated

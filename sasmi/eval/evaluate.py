@@ -118,8 +118,7 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
         tsne_section = tsne_figure(*tsne_map(real, sets, cfg), out_dir / "tsne.png")
     two_sample = {}
     if cfg.two_sample is not None:  # torch's own threads: outside the one-BLAS-thread block
-        log(f"two-sample test: a classifier against the real chips, {cfg.two_sample.folds} folds "
-            f"x {cfg.two_sample.repeats} per set")
+        log(f"two-sample test: a classifier against the real chips, {cfg.two_sample.folds} folds per set")
         two_sample = two_sample_metrics(real, sets, cfg.two_sample, cfg.seed, out_dir)
     result = {"config": asdict(cfg), "phi_dim": dim, "image_size": int(real.images.shape[-1]),
               "real": {"dir": str(real.folder), "n": len(real.phi)},

@@ -20,6 +20,13 @@ def test_two_draws_of_one_distribution_score_about_one_half():
     assert len(result["aucs"]) == 6 and result["p_fake"].shape == (120,)
 
 
+def test_large_sets_take_one_repeat_of_the_folds():
+    """From `one_repeat_from` chips on each side the folds alone pin the AUC: half the classifiers."""
+    cfg = TwoSampleConfig(folds=3, repeats=2, epochs=40, max_steps=20, size=32, one_repeat_from=50)
+    small, large = (two_sample_auc(_speckle(n, 6.0, 0), _speckle(60, 6.0, 1), cfg) for n in (40, 60))
+    assert (small["repeats"], len(small["aucs"])) == (2, 6) and (large["repeats"], len(large["aucs"])) == (1, 3)
+
+
 def test_a_texture_the_real_chips_lack_is_found():
     """Same mean and size, other speckle: φ-FID might miss it, a classifier does not."""
     result = two_sample_auc(_speckle(40, 6.0, 0), _speckle(120, 1.5, 1), QUICK)
