@@ -41,6 +41,12 @@ def run_fit(args: argparse.Namespace) -> int:
 
     cfg = FitConfig(params=parse_params(args.params), steps=args.steps, lr=args.lr, scenes=args.scenes,
                     size=args.size, spp=args.spp, seed=args.seed, speckle=args.speckle)
-    out = fit_to_real(args.preset, args.phi, args.real, cfg, args.out)
+    from sasmi.images import FolderLock
+
+    lock = FolderLock(args.out, "running sasmi fit-scene")  # two fits would mix their trajectories
+    try:
+        out = fit_to_real(args.preset, args.phi, args.real, cfg, args.out)
+    finally:
+        lock.release()
     print(f"wrote {out}/fitted.toml, trajectory.csv, loss.png")
     return 0

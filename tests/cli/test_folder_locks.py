@@ -1,4 +1,4 @@
-"""Two commands on one output folder: translations, YOLO exports, evaluations and calibrations take RUN/.lock,
+"""Two commands on one output folder: translations, YOLO exports, evaluations, fit-scenes and calibrations take RUN/.lock,
 so a second one is refused in one line (exit 2) and the folder is left as the first one writes it; a command
 that ends removes the lock file, and the folder too if it wrote nothing."""
 from __future__ import annotations
@@ -20,12 +20,15 @@ def _commands(render_set, out, real=None):
         "exporting": ["export", str(render_set), "--format", "yolo", "--out", str(out)],
         "evaluating": ["evaluate", "--real", str(real), "--set", f"renders={render_set}", "--bootstrap", "5",
                        "--no-two-sample", "--no-cache", "--out", str(out)],
+        "running sasmi fit-scene": ["fit-scene", "cylinder_chip", "--real", str(real), "--phi", str(shipped("phi")), "--steps", "1",
+                                    "--out", str(out)],
         "running sasmi calibrate": ["calibrate", "--real", str(real), "--preset", "muscle_paper", "--chips", "8",
                                     "--trials", "1", "--size", "32", "--out", str(out)],
     }
 
 
-@pytest.mark.parametrize("what", ["translating", "exporting", "evaluating", "running sasmi calibrate"])
+@pytest.mark.parametrize("what", ["translating", "exporting", "evaluating", "running sasmi fit-scene",
+                                  "running sasmi calibrate"])
 def test_a_second_command_on_a_held_folder_is_refused_in_one_line(what, render_set, real_chips, tmp_path, capsys):
     out = tmp_path / "out"
     held = FolderLock(out, what)  # as another process's command would hold it
