@@ -88,6 +88,16 @@ def test_fid_rank_deficient_matches_full_eigen_route():
     assert ev.fid(small_a @ q.T, small_b @ q.T) == pytest.approx(ev.fid(small_a, small_b), rel=1e-9)
 
 
+@pytest.mark.parametrize("n", [40, 300])  # fewer and more chips than φ's dimensions
+def test_a_resample_counted_by_its_distinct_rows_has_the_fid_of_the_resample_itself(n):
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((n, 64)), rng.standard_normal((n, 64)) * 1.3 + 0.2
+    rows_a, rows_b = rng.integers(0, n, n), rng.integers(0, n, n)
+    counted = ev._fid_of(ev._resampled(a, rows_a), ev._resampled(b, rows_b))
+    assert counted == pytest.approx(ev.fid(a[rows_a], b[rows_b]), rel=1e-9)
+    assert counted != pytest.approx(ev.fid(a, b), rel=1e-3)  # a resample, not the sets
+
+
 def test_fid_bootstrap_and_real_split():
     rng = np.random.default_rng(3)
     a, b = rng.standard_normal((100, 4)), rng.standard_normal((100, 4)) + 1.0
