@@ -308,11 +308,11 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                 with full_disk_named(out):
                     width_now = width if cfg.trials is None else min(width, cfg.trials - done)
                     _batch(study, preset, cfg, run, width_now)
-        stop.restore()
-        final = replace(cfg, seed=cfg.seed + 1)
-        best_raw = best_valid(study, preset, cfg, final)
-        pins = sensitivity(study.trials[study.user_attrs["calibrated_trial"]].params, lambda values: trial_score(
-            apply(preset.raw, values), preset.path, real, cfg, encoder)["objective"])
+            stop.restore()
+            final = replace(cfg, seed=cfg.seed + 1)
+            best_raw = best_valid(study, preset, cfg, final)
+            pins = sensitivity(study.trials[study.user_attrs["calibrated_trial"]].params, lambda settings: [
+                s["objective"] for s in run([apply(preset.raw, values) for values in settings])])
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)

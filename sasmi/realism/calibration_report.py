@@ -30,21 +30,23 @@ def _number(v: float) -> str:
     return "—" if not math.isfinite(v) else f"{v:.3g}"
 
 
-def sensitivity(best: dict[str, float], objective_of) -> dict[str, dict]:
+def sensitivity(best: dict[str, float], objectives_of) -> dict[str, dict]:
     """Per knob, the calibrated objective's mean rise with that knob alone moved STEP of its range down and up
-    (clipped to the range); objective_of(values) scores a setting of every knob. A knob whose moves leave the
-    objective where it was is one the chips cannot pin: any value of it scores alike."""
+    (clipped to the range); objectives_of(settings) scores a list of settings of every knob at once (on the
+    trials' workers). A knob whose moves leave the objective where it was is one the chips cannot pin."""
     from sasmi.realism.preset_space import knob
 
-    base = objective_of(best)
-    result = {}
+    moves = {}
     for name, value in best.items():
         k = knob(name)
         to, back = (math.log, math.exp) if k.log else (float, float)
         width = STEP * (to(k.high) - to(k.low))
-        moved = [min(max(back(to(max(value, k.low)) + sign * width), k.low), k.high) for sign in (-1, 1)]
-        rise = float(np.mean([objective_of({**best, name: m}) - base for m in moved]))
-        result[name] = {"moved": moved, "rise": rise, "share": rise / max(base, 1e-12),
+        moves[name] = [min(max(back(to(max(value, k.low)) + sign * width), k.low), k.high) for sign in (-1, 1)]
+    base, *moved = objectives_of([best, *({**best, name: m} for name in moves for m in moves[name])])
+    result = {}
+    for i, name in enumerate(moves):
+        rise = float(np.mean(moved[2 * i:2 * i + 2]) - base)
+        result[name] = {"moved": moves[name], "rise": rise, "share": rise / max(base, 1e-12),
                         "pinned": rise >= RISE * base}
     return result
 

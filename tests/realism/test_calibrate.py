@@ -189,19 +189,33 @@ def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
         scores[workers] = study.trials[0].value
     assert scores[2] == pytest.approx(scores[1], rel=1e-6)
 
+    # the knob moves of the report were scored on the workers too, as here
+    from sasmi.eval.features import as_encoder
+    from sasmi.realism.calibrate import apply, real_chips, trial_score
+    from sasmi.realism.calibration_report import sensitivity
+
+    preset, encoder = load_preset(start), as_encoder(None)
+    chips = real_chips(real, cfg, encoder)
+    best = study.trials[study.user_attrs["calibrated_trial"]].params
+    here = sensitivity(best, lambda settings: [trial_score(apply(preset.raw, v), preset.path, chips, cfg,
+                                                           encoder)["objective"] for v in settings])
+    there = json.loads((out / "sensitivity.json").read_text())
+    assert there["post.gain"]["rise"] == pytest.approx(here["post.gain"]["rise"], rel=1e-6)
+
 
 def test_the_report_tells_a_pinned_knob_from_one_the_chips_cannot_pin():
     from sasmi.realism.calibration_report import sensitivity, sensitivity_lines
 
     calls = []
 
-    def objective(values):  # sees the gain alone: every noise level scores alike
-        calls.append(values)
-        return 1.0 + math.log(values["post.gain"] / 0.3) ** 2
+    def objectives(settings):  # sees the gain alone: every noise level scores alike
+        calls.append(settings)
+        return [1.0 + math.log(values["post.gain"] / 0.3) ** 2 for values in settings]
 
     best = {"post.gain": 0.3, "post.noise_std": 0.05}
-    pins = sensitivity(best, objective)
-    assert len(calls) == 5 and calls[0] == best  # the calibrated setting, then each knob alone down and up
+    pins = sensitivity(best, objectives)
+    assert len(calls) == 1 and len(calls[0]) == 5  # one batch for the trials' workers ...
+    assert calls[0][0] == best  # ... the calibrated setting, then each knob alone down and up
     assert pins["post.gain"]["pinned"] and pins["post.gain"]["rise"] > 0.5
     assert pins["post.gain"]["moved"][0] < 0.3 < pins["post.gain"]["moved"][1]
     assert not pins["post.noise_std"]["pinned"] and pins["post.noise_std"]["rise"] == 0.0
