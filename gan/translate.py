@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.images import FolderLock, list_images, read_gray, write_gray, write_text
+from sasmi.images import FolderLock, check_room, list_images, read_gray, write_gray, write_text
 from sasmi.labels import ChipLabel, read_labels
 from sasmi.preprocess import resize, signed_to_unit, unit_to_signed
 
@@ -94,6 +94,11 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
         raise SasmiError(f"{in_dir}: no image (png, jpg, tif, tiff, npy) in it")
     if out_dir.resolve() == in_dir.resolve() or in_dir.resolve() in out_dir.resolve().parents:
         raise SasmiError(f"--out {out_dir}: must lie outside the input folder {in_dir}")
+    # a translated chip takes about the room of its render (8-bit PNG either way; larger renders, less); a
+    # rerun rewrites the chips already there in place
+    src_root, dst_root = _roots(in_dir, out_dir)
+    todo = [p for p in paths if not (dst_root / p.relative_to(src_root)).with_suffix(".png").is_file()]
+    check_room(out_dir, sum(p.stat().st_size for p in todo), f"{len(todo)} translated chips")
     lock = FolderLock(out_dir, "translating")  # two generators into one folder would mix their chips
     try:
         written = _translate_all(generator, paths, in_dir, out_dir, batch)
@@ -104,10 +109,15 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
     return written
 
 
+def _roots(in_dir: Path, out_dir: Path) -> tuple[Path, Path]:
+    """Where the images lie in and go to: images/ of a render set, else the folders themselves."""
+    render_set = (in_dir / "images").is_dir()
+    return (in_dir / "images", out_dir / "images") if render_set else (in_dir, out_dir)
+
+
 def _translate_all(generator: torch.nn.Module, paths: list[Path], in_dir: Path, out_dir: Path, batch: int) -> int:
     render_set = (in_dir / "images").is_dir()
-    src_root = in_dir / "images" if render_set else in_dir
-    dst_root = out_dir / "images" if render_set else out_dir
+    src_root, dst_root = _roots(in_dir, out_dir)
 
     written, place = 0, {path: i for i, path in enumerate(paths)}
     with tqdm(total=len(paths), unit="img", desc="translate", dynamic_ncols=True) as bar:

@@ -65,8 +65,12 @@ def check_room(folder: str | os.PathLike, need: int, what: str) -> None:
         place = place.parent
     free = shutil.disk_usage(place).free
     if need > free:
-        raise SasmiError(f"{folder}: {what} need about {need / 1e6:,.0f} MB and its disk has {free / 1e6:,.0f} MB "
+        raise SasmiError(f"{folder}: {what} need about {_amount(need)} and its disk has {_amount(free)} "
                          f"free; free some space or choose another --out")
+
+
+def _amount(size: int) -> str:
+    return f"{size / 1e6:,.0f} MB" if size >= 1e6 else f"{size / 1e3:,.0f} kB"
 
 
 def write_torch(path: str | os.PathLike, data: dict) -> Path:

@@ -20,7 +20,7 @@ import torch
 
 from sasmi.atr.datasets import RenderSet
 from sasmi.errors import SasmiError
-from sasmi.images import FolderLock, atomic_path, write_text
+from sasmi.images import FolderLock, atomic_path, check_room, write_text
 
 FORMATS = ("coco", "yolo")
 
@@ -80,6 +80,8 @@ def export_yolo(folder: str | os.PathLike, out: str | os.PathLike, companions: b
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SasmiError(f"--out {out}: exists and is not a folder")
+    todo = [i for i in range(len(renders)) if not _yolo_image(renders, i, out).is_file()]  # a rerun keeps its copies
+    check_room(out, sum(renders.image_path(i).stat().st_size for i in todo), f"{len(todo)} chips' images")
     lock = FolderLock(out, "exporting")  # two sets into one folder would mix their images and labels
     try:
         _write_yolo(renders, out, companions)
@@ -88,13 +90,17 @@ def export_yolo(folder: str | os.PathLike, out: str | os.PathLike, companions: b
     return out
 
 
+def _yolo_image(renders: RenderSet, i: int, out: Path) -> Path:
+    """Where chip i's image goes: every tenth chip (index % 10 == 9) to val, the others to train."""
+    split = "val" if renders.labels[i].index % 10 == 9 else "train"
+    return out / "images" / split / renders.image_path(i).name
+
+
 def _write_yolo(renders: RenderSet, out: Path, companions: bool) -> None:
     for i in range(len(renders)):
         image, target = renders[i]
-        label = renders.labels[i]
-        split = "val" if label.index % 10 == 9 else "train"
-        src = renders.image_path(i)
-        dst = out / "images" / split / src.name
+        src, dst = renders.image_path(i), _yolo_image(renders, i, out)
+        split = dst.parent.name
         if not dst.is_file():
             with atomic_path(dst) as tmp:
                 shutil.copyfile(src, tmp)

@@ -118,3 +118,27 @@ def test_translate_on_a_full_disk(tmp_path, monkeypatch, capsys, render_set):
     assert main([*args, "--out", str(out)]) == 0  # the rerun completes the set
     cut, whole = _files(out), _files(tmp_path / "whole")
     assert cut.keys() == whole.keys() and all(cut[k] == whole[k] for k in cut if k != "translate.json")
+
+
+def test_a_translation_or_export_that_clearly_will_not_fit_is_refused_before_any_work(tmp_path, monkeypatch, capsys,
+                                                                                     render_set):
+    import shutil
+
+    from sasmi.weights import shipped
+
+    commands = {"translate": ["translate", "--in", str(render_set), "--generator", str(shipped("sasgan"))],
+                "export": ["export", str(render_set), "--format", "yolo"]}
+    real_usage = shutil.disk_usage
+    for name, args in commands.items():
+        out = tmp_path / name
+        monkeypatch.setattr(shutil, "disk_usage", lambda path: real_usage(path)._replace(free=1000))
+        assert main([*args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"{out}: 8 " in err and "kB and its disk has 1 kB free" in err, err
+        assert not out.exists()
+        monkeypatch.undo()
+        assert main([*args, "--out", str(out)]) == 0
+        monkeypatch.setattr(shutil, "disk_usage", lambda path: real_usage(path)._replace(free=1000))
+        assert main([*args, "--out", str(out)]) == 0  # a rerun: every chip is there, nothing more to write
+        monkeypatch.undo()
+        capsys.readouterr()
