@@ -4,8 +4,9 @@
 (speckle, edges, gray-level texture). Here the small CNN of sasmi.eval.classifier learns real
 (0) against generated (1) on all folds but one and scores the held-out fold by ROC AUC:
 0.5 means it cannot tell them apart, 1.0 that it always can. K folds over R repeats give the
-spread (one repeat for large sets, whose folds alone pin the AUC). Every generated chip gets its held-out probability of being generated; the chips it
-finds most synthetic are drawn beside their nearest real chip in φ, so the signature can be seen.
+spread (one repeat for large sets, whose folds alone pin the AUC). Every generated chip gets its
+held-out probability of being generated; the chips it finds most synthetic are drawn beside their
+nearest real chip in φ, so the signature can be seen.
 """
 from __future__ import annotations
 

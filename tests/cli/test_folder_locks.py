@@ -1,6 +1,6 @@
-"""Two commands on one output folder: translations, YOLO exports, evaluations, fit-scenes and calibrations take RUN/.lock,
-so a second one is refused in one line (exit 2) and the folder is left as the first one writes it; a command
-that ends removes the lock file, and the folder too if it wrote nothing."""
+"""Two commands on one output folder: translations, YOLO exports, evaluations, fit-scenes and calibrations take
+RUN/.lock, so a second one is refused in one line (exit 2) and the folder is left as the first one writes it; a
+command that ends removes the lock file, and the folder too if it wrote nothing."""
 from __future__ import annotations
 
 import os
@@ -20,8 +20,8 @@ def _commands(render_set, out, real=None):
         "exporting": ["export", str(render_set), "--format", "yolo", "--out", str(out)],
         "evaluating": ["evaluate", "--real", str(real), "--set", f"renders={render_set}", "--bootstrap", "5",
                        "--no-two-sample", "--no-cache", "--out", str(out)],
-        "running sasmi fit-scene": ["fit-scene", "cylinder_chip", "--real", str(real), "--phi", str(shipped("phi")), "--steps", "1",
-                                    "--out", str(out)],
+        "running sasmi fit-scene": ["fit-scene", "cylinder_chip", "--real", str(real), "--phi", str(shipped("phi")),
+                                    "--steps", "1", "--out", str(out)],
         "running sasmi calibrate": ["calibrate", "--real", str(real), "--preset", "muscle_paper", "--chips", "8",
                                     "--trials", "1", "--size", "32", "--out", str(out)],
     }
