@@ -21,7 +21,6 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.reference_weights import sonar_floors  # noqa: E402
@@ -38,7 +37,7 @@ def main() -> int:
     from sasmi.images import list_images
     from sasmi.preprocess import load_image
     from sasmi.realism.floors import fresh_floor, gain_bands, seabed_floor
-    from sasmi.realism.seabeds import draw_seabed, fit_seabeds
+    from sasmi.realism.seabeds import draw_seabed, fit_seabeds, speckle_of
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.scene.preset import load_preset
 
@@ -56,7 +55,7 @@ def main() -> int:
     def render_speckle(i: int) -> np.ndarray:
         rng_i = np.random.default_rng([0, i])
         seabed = draw_seabed(seabeds, (128, 128), rng_i) * gain_bands(128, rng_i)[:, None]
-        return seabed * renders[i] / (ndimage.gaussian_filter(renders[i], 4.0) + 1e-3)
+        return seabed * speckle_of(renders[i])
 
     sets = {"drawn": [seabed_floor(seabeds, renders[i], empty, 0, i) for i in range(args.count)],
             "render speckle": [render_speckle(i) for i in range(args.count)],

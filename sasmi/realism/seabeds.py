@@ -207,10 +207,10 @@ def load_seabeds(path: str | os.PathLike) -> Seabeds:
         raise SasmiError(f"{path}: seabeds format {data.get('format')!r}; this sasmi reads format {FORMAT} "
                          f"(written by {data.get('sasmi', 'another version')})")
     try:
-        state = {k: data["state"][k].double().numpy() for k in TABLES}
-        ok = Seabeds(**state, path=path).shapes_agree()
+        seabeds = Seabeds(**{k: data["state"][k].double().numpy() for k in TABLES}, path=path)
+        ok = seabeds.shapes_agree()
     except (KeyError, TypeError, AttributeError):
         ok = False
     if not ok:
         raise SasmiError(f"{path}: its seabeds tables are missing or of the wrong shape (tables {', '.join(TABLES)})")
-    return Seabeds(**state, path=path)
+    return seabeds
