@@ -65,7 +65,7 @@ def main() -> int:
     args = ap.parse_args()
 
     from sasmi.eval.features import as_encoder, load_set
-    from sasmi.eval.metrics import on_manifold
+    from sasmi.eval.manifold import on_manifold
     from sasmi.gan.autoencoder import load_encoder
     from sasmi.labels import read_labels
 

@@ -26,7 +26,7 @@ import torch
 from sasmi.gan import distributed
 from sasmi.gan.run import RunConfig, RunFolder, config_from_dict, read_checkpoint
 from sasmi.errors import SasmiError, Stopped
-from sasmi.images import FolderLock
+from sasmi.images import FolderLock, check_room
 
 Logs = dict[str, float]
 
@@ -99,6 +99,9 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
         for stale in (Path(out) / "checkpoints").glob(".*.tmp.pt"):
             stale.unlink(missing_ok=True)
     try:
+        if lock:
+            kept = sum((Path(out) / "checkpoints" / f"{name}.pt").is_file() for name in ("last", "best"))
+            check_room(out, (3 - kept) * checkpoint_bytes(phases.state), f"{kind.name} checkpoints")
         run = RunFolder(kind.name, cfg, out, phases.inputs, resume, phases.state, phases.samples, main=world.main)
     except BaseException:
         if lock:
@@ -136,6 +139,18 @@ def train(kind: Kind, cfg: RunConfig, out: str | os.PathLike, inputs: dict[str, 
     if phases.finish and run.step == cfg.steps and world.main:
         phases.finish(run.out)
     return Trained(run.out, start, run.step)
+
+
+def checkpoint_bytes(state: dict[str, Any]) -> int:
+    """About the bytes of one checkpoint of `state` once training has begun: every model's tensors and, for
+    each optimiser, two moments of each of its parameters (Adam's; they do not exist before the first step)."""
+    total = 0
+    for value in state.values():
+        if isinstance(value, torch.optim.Optimizer):
+            total += 2 * sum(p.numel() * p.element_size() for group in value.param_groups for p in group["params"])
+        elif isinstance(value, torch.nn.Module):  # the generator's moving average too
+            total += sum(t.numel() * t.element_size() for t in value.state_dict().values())
+    return total
 
 
 class StopSignals:

@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from sasmi.eval import metrics
+from sasmi.eval import manifold
 from sasmi.eval.config import EvalConfig
 from sasmi.eval.features import FeatureSet
 from sasmi.eval.neighbours import nearest
@@ -33,7 +33,7 @@ def coverage_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConf
     draws = min(cfg.coverage_draws, cfg.bootstrap)  # a quick evaluation (--bootstrap 10) stays quick
     result, rows = {}, []
     for i, s in enumerate(sets):
-        cover = metrics.real_coverage(real.phi, s.phi, cfg.pr_k, draws, cfg.seed + 1 + i)  # (N_real,)
+        cover = manifold.real_coverage(real.phi, s.phi, cfg.pr_k, draws, cfg.seed + 1 + i)  # (N_real,)
         least = np.argsort(cover, kind="stable")[:cfg.least_covered_shown]
         idx, dist = nearest(real.phi[least], s.phi, 1)  # (L, 1) each
         result[s.name] = {"mean": float(cover.mean()), "never": int(np.sum(cover == 0)),

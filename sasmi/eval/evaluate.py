@@ -18,7 +18,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.eval import metrics
+from sasmi.eval import manifold, metrics
 from sasmi.eval.config import EvalConfig
 from sasmi.eval.coverage import FIGURE as COVERAGE_FIGURE, coverage_metrics
 from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
@@ -146,7 +146,7 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
     splits = metrics.RealSplits(real.phi, cfg.seed)  # the ratio's denominators: computed once for every set
     reference = metrics.fid_real_split(real.phi, cfg.bootstrap, splits=splits)
     k = metrics.kid_real_split(real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, cfg.seed)
-    precision, recall = metrics.precision_recall_real_split(real.phi, cfg.pr_k, cfg.bootstrap, cfg.seed)
+    precision, recall = manifold.precision_recall_real_split(real.phi, cfg.pr_k, cfg.bootstrap, cfg.seed)
     real_levels = gray_levels(real.images)
     rows = {REAL_VS_REAL: {"n": [len(half_a), len(half_b)], "fid": reference.value, "fid_std": reference.std,
                            "fid_ratio": 1.0, "fid_ratio_std": math.nan,
@@ -159,7 +159,7 @@ def realism_table(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig)
         f = metrics.fid_bootstrap(s.phi, real.phi, cfg.bootstrap, seed)
         ratio = metrics.fid_ratio_matched(s.phi, real.phi, cfg.bootstrap, cfg.seed, splits)  # the same splits
         k = metrics.kid(s.phi / scale, real.phi / scale, cfg.kid_subsets, cfg.kid_subset_size, seed)
-        precision, recall = metrics.precision_recall_matched(real.phi, s.phi, cfg.pr_k, cfg.bootstrap, seed)
+        precision, recall = manifold.precision_recall_matched(real.phi, s.phi, cfg.pr_k, cfg.bootstrap, seed)
         rows[s.name] = {"n": len(s.phi), "fid": f.value, "fid_std": f.std, "fid_ratio": ratio.value,
                         "fid_ratio_std": ratio.std, "fid_mean_part": metrics.fid_mean_part(s.phi, real.phi),
                         "kid": k.value, "kid_std": k.std,

@@ -1,6 +1,6 @@
 """Realism metrics: pure functions of φ feature arrays (N, D), numpy in float64.
 
-FID with bootstrap and matched-size errors, KID, improved precision/recall. Nothing here
+FID with bootstrap and matched-size errors, KID (precision/recall: sasmi.eval.manifold). Nothing here
 reads files, draws or knows about image sets. Definitions: docs/evaluate.md.
 """
 from __future__ import annotations
@@ -15,7 +15,6 @@ import numpy as np
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.eval.neighbours import kth_neighbour_radius, within_any_ball
 
 
 @dataclass(frozen=True)
@@ -258,85 +257,6 @@ def kid_real_split(feats_real: np.ndarray, subsets: int = 100, subset_size: int 
             order = rng.permutation(len(x))
             reps.append(mmd2_unbiased(x[order[:m]], x[order[m:2 * m]]))
     return Estimate(float(np.mean(reps)), float(np.std(reps, ddof=1)) if subsets > 1 else math.nan)
-
-
-def precision_recall(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3) -> tuple[float, float]:
-    """Improved precision and recall (Kynkäänniemi et al. 2019) with k-NN ball manifolds.
-
-    precision: fraction of fake samples inside some real sample's ball (radius = distance
-    to its k-th nearest real neighbour); recall: the same with the roles swapped.
-    """
-    real = _as_features(feats_real, k + 1, "precision_recall (real)")
-    fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
-    # in blocks of rows (sasmi.eval.neighbours): memory stays bounded at any set size
-    precision = np.mean(on_manifold(fake, real, k))
-    recall = np.mean(on_manifold(real, fake, k))
-    return float(precision), float(recall)
-
-
-def precision_recall_matched(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n: int = 100,
-                             seed: int = 0) -> tuple[Estimate, Estimate]:
-    """Precision and recall at equal set sizes: each of `n` replicates draws m = min(|real|, |fake|)
-    of each set (without replacement). A ball's radius shrinks as its set grows, so recall of a
-    few real chips against many generated ones reads far lower than against as few of them:
-    recall would fall the more chips one generated. Equal sizes, as in Kynkäänniemi et al.
-    (50k and 50k) and as in the real→real row, make it a property of the distributions;
-    precision's mean is unchanged."""
-    real = _as_features(feats_real, k + 1, "precision_recall (real)")
-    fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
-    m = min(len(real), len(fake))
-    if len(real) == len(fake):
-        n = 1  # nothing to draw: every replicate would be the same
-    rng = np.random.default_rng(seed)
-    with one_blas_thread():
-        reps = replicates(lambda rows: precision_recall(real[rows[0]], fake[rows[1]], k),
-                          lambda i: (rng.choice(len(real), m, replace=False), rng.choice(len(fake), m, replace=False)),
-                          n, mean_known, desc="precision/recall")
-    return _precision_recall_estimates(reps)
-
-
-def precision_recall_real_split(feats_real: np.ndarray, k: int = 3, n: int = 100,
-                                seed: int = 0) -> tuple[Estimate, Estimate]:
-    """Precision and recall of one random half of the real set against the other, over `n` splits:
-    what a perfect generator reaches at the size that `precision_recall_matched` compares."""
-    x = _as_features(feats_real, 2 * (k + 1), "precision_recall_real_split")
-    rng = np.random.default_rng(seed)
-    half = len(x) // 2
-    with one_blas_thread():
-        reps = replicates(lambda order: precision_recall(x[order[:half]], x[order[half:2 * half]], k),
-                          lambda i: rng.permutation(len(x)), n, mean_known, desc="precision/recall real halves")
-    return _precision_recall_estimates(reps)
-
-
-def _precision_recall_estimates(values: np.ndarray) -> tuple[Estimate, Estimate]:
-    """(n, 2) (precision, recall) replicates → each one's mean ± std over them (NaN ± for one)."""
-    spread = values.std(axis=0, ddof=1) if len(values) > 1 else np.full(2, math.nan)
-    return tuple(Estimate(float(values[:, i].mean()), float(spread[i])) for i in range(2))
-
-
-def real_coverage(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n: int = 100,
-                  seed: int = 0) -> np.ndarray:
-    """(N_real,) in [0, 1]: recall chip by chip. For each real sample, the share of `n` draws of
-    m = min(|real|, |fake|) generated samples whose k-NN balls hold it: the matched size of
-    `precision_recall_matched`, whose recall this averages to over the real set. 0: no draw of the
-    generated set has a sample near this real one."""
-    real = _as_features(feats_real, 1, "real_coverage (real)")
-    fake = _as_features(feats_fake, k + 1, "real_coverage (generated)")
-    m = min(len(real), len(fake))
-    if m == len(fake):
-        n = 1  # every draw would be the whole generated set
-    rng = np.random.default_rng(seed)
-    hits = np.zeros(len(real))
-    with one_blas_thread():
-        for _ in range(n):
-            hits += on_manifold(real, fake[rng.choice(len(fake), m, replace=False)], k)
-    return hits / n
-
-
-def on_manifold(points: np.ndarray, reference: np.ndarray, k: int = 3) -> np.ndarray:
-    """(N,) bool: each point inside some reference sample's ball (radius: its distance to its k-th
-    nearest reference neighbour); the mean over generated points against real ones is precision."""
-    return within_any_ball(points, reference, kth_neighbour_radius(reference, k))
 
 
 def rms(feats: np.ndarray) -> float:

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from sasmi.eval import manifold as mf
 from sasmi.eval import metrics as ev
 from sasmi.eval import neighbours as nb
 
@@ -124,12 +125,12 @@ def test_kid_unbiased_near_zero_for_one_distribution_and_positive_when_shifted()
 def test_precision_recall():
     rng = np.random.default_rng(5)
     real = rng.standard_normal((300, 2))
-    p, r = ev.precision_recall(real, rng.standard_normal((300, 2)), k=3)
+    p, r = mf.precision_recall(real, rng.standard_normal((300, 2)), k=3)
     assert p > 0.85 and r > 0.85
     collapsed = 0.05 * rng.standard_normal((300, 2))  # mode collapse: realistic but not diverse
-    p, r = ev.precision_recall(real, collapsed, k=3)
+    p, r = mf.precision_recall(real, collapsed, k=3)
     assert p > 0.95 and r < 0.3
-    p, r = ev.precision_recall(real, rng.standard_normal((300, 2)) + 20, k=3)
+    p, r = mf.precision_recall(real, rng.standard_normal((300, 2)) + 20, k=3)
     assert p == 0 and r == 0
 
 
@@ -161,7 +162,7 @@ def test_replicates_stop_once_the_mean_is_known_and_do_not_depend_on_the_cores(m
     for workers in (1, 2):
         monkeypatch.setattr(ev, "cores", lambda: workers)
         results[workers] = (ev.fid_ratio_matched(close, real, n=300, seed=1), ev.fid_real_split(real, n=300, seed=1),
-                            ev.precision_recall_matched(real, close[:300], k=3, n=300, seed=1))
+                            mf.precision_recall_matched(real, close[:300], k=3, n=300, seed=1))
     assert results[1] == results[2]
     calls = []
     values = ev.replicates(lambda v: calls.append(v) or v, lambda i: 1.0 + 0.01 * (i % 2), 500, ev.mean_known)
@@ -175,24 +176,34 @@ def test_recall_does_not_fall_as_more_chips_are_generated():
     rng = np.random.default_rng(8)
     real = rng.standard_normal((40, 256))
     few, many = rng.standard_normal((40, 256)), rng.standard_normal((800, 256))  # the real distribution
-    _, recall_few = ev.precision_recall_matched(real, few, k=3, n=30)
-    _, recall_many = ev.precision_recall_matched(real, many, k=3, n=30)
-    _, recall_real = ev.precision_recall_real_split(real, k=3, n=30)
-    assert ev.precision_recall(real, many, k=3)[1] < recall_few.value - 0.1  # the balls shrink
+    _, recall_few = mf.precision_recall_matched(real, few, k=3, n=30)
+    _, recall_many = mf.precision_recall_matched(real, many, k=3, n=30)
+    _, recall_real = mf.precision_recall_real_split(real, k=3, n=30)
+    assert mf.precision_recall(real, many, k=3)[1] < recall_few.value - 0.1  # the balls shrink
     assert abs(recall_many.value - recall_few.value) < 0.1
     assert abs(recall_many.value - recall_real.value) < 0.15 and recall_many.std > 0
     collapsed = 0.05 * rng.standard_normal((800, 256))  # still caught at equal sizes
-    precision, recall = ev.precision_recall_matched(real, collapsed, k=3, n=50)
+    precision, recall = mf.precision_recall_matched(real, collapsed, k=3, n=50)
     assert precision.value > 0.9 and recall.value < 0.2
+
+
+def test_real_halves_from_one_distance_matrix_equal_halves_computed_apart(monkeypatch):
+    rng = np.random.default_rng(9)
+    real = rng.standard_normal((90, 64))
+    shared = mf.precision_recall_real_split(real, k=3, n=20, seed=4)  # 90² distances: one matrix
+    monkeypatch.setattr(mf, "DENSE_BYTES", 0)  # each split's distances computed apart, as for large sets
+    apart = mf.precision_recall_real_split(real, k=3, n=20, seed=4)
+    assert [e.value for e in shared] == pytest.approx([e.value for e in apart], abs=1e-12)
+    assert [e.std for e in shared] == pytest.approx([e.std for e in apart], abs=1e-12) and shared[0].std > 0
 
 
 def test_coverage_finds_the_real_chips_no_generated_chip_is_near():
     rng = np.random.default_rng(11)
     covered, missed = rng.standard_normal((30, 8)), rng.standard_normal((10, 8)) + 12  # a mode the set lacks
     generated = rng.standard_normal((200, 8))
-    cover = ev.real_coverage(np.concatenate([covered, missed]), generated, k=3, n=20)
+    cover = mf.real_coverage(np.concatenate([covered, missed]), generated, k=3, n=20)
     assert cover.shape == (40,) and cover[:30].mean() > 0.7 and np.all(cover[30:] == 0)
-    _, recall = ev.precision_recall_matched(np.concatenate([covered, missed]), generated, k=3, n=200)
+    _, recall = mf.precision_recall_matched(np.concatenate([covered, missed]), generated, k=3, n=200)
     assert abs(cover.mean() - recall.value) < 0.05  # its mean is the realism table's recall
 
 
@@ -251,8 +262,8 @@ def test_blocked_neighbours_equal_the_dense_matrix(monkeypatch, block_bytes):
     monkeypatch.setattr(nb, "BLOCK_BYTES", block_bytes)
     rng = np.random.default_rng(7)
     real, fake = rng.standard_normal((60, 12)), rng.standard_normal((45, 12)) * 1.2 + 0.3
-    assert ev.precision_recall(real, fake, k=3) == pytest.approx(dense_precision_recall(real, fake, 3), abs=0)
-    assert 0 < ev.precision_recall(real, fake, k=3)[0] < 1  # not a trivial all-or-nothing case
+    assert mf.precision_recall(real, fake, k=3) == pytest.approx(dense_precision_recall(real, fake, 3), abs=0)
+    assert 0 < mf.precision_recall(real, fake, k=3)[0] < 1  # not a trivial all-or-nothing case
     d = dense_distances(fake, real)
     idx, dist = nb.nearest(fake, real, k=4)
     np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :4])
@@ -262,10 +273,13 @@ def test_blocked_neighbours_equal_the_dense_matrix(monkeypatch, block_bytes):
     idx, dist = nb.nearest(real, real, k=2, exclude_self=True)
     np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :2])
     np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :2], rtol=1e-12)
-    # float32 pixels (blocked in the reference as well) give the float64 distances of the same values
-    pixels = rng.uniform(0, 1, (30, 200)).astype(np.float32)
-    idx, dist = nb.nearest(pixels[:9], pixels, k=3)
-    d = dense_distances(pixels[:9], pixels)
+    # 8-bit pixels of 128 px chips (blocked in the reference as well), compared in float32: the float64
+    # distances to 1e-3 of full scale rms, a chip one gray level from a real one included (a copy)
+    pixels = rng.integers(0, 256, (30, 128 * 128), dtype=np.uint8)
+    query = np.concatenate([pixels[:4], np.clip(pixels[4:8].astype(int) + rng.integers(-1, 2, (4, 128 * 128)),
+                                                 0, 255).astype(np.uint8)])
+    idx, dist = nb.nearest(query, pixels, k=3)
+    d = dense_distances(query, pixels)
     np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :3])
-    # (a point's distance to itself is √(round-off) ≈ 1e-7 in both, from the expansion |a|² + |b|² − 2ab)
-    np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :3], rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :3], rtol=0, atol=1e-3 * 255 * 128)
+    assert np.all(dist[:, 0] <= 128)  # the copies found, each within one gray level rms

@@ -115,3 +115,25 @@ def test_kill_9_anywhere_loses_at_most_the_steps_since_the_last_checkpoint(tmp_p
     assert not stale.exists()
     assert cli.main([*args, "--steps", str(step + 10), "--out", str(tmp_path / "unbroken")]) == 0
     assert _same(_weights(tmp_path / "run")[1], _weights(tmp_path / "unbroken")[1])
+
+
+def test_a_training_that_clearly_will_not_fit_is_refused_before_any_work(tmp_path, real_chips, monkeypatch, capsys):
+    import shutil
+
+    args = [*TRAIN, "--real", str(real_chips / "targets"), "--steps", "2"]
+    real_usage = shutil.disk_usage
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: real_usage(path)._replace(free=1000))
+    out = tmp_path / "run"
+    assert cli.main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{out}: autoencoder checkpoints need about" in err, err
+    assert "its disk has 1 kB free" in err and not out.exists()
+    monkeypatch.undo()
+    assert cli.main([*args, "--out", str(out)]) == 0
+    # the estimate is a checkpoint's size once trained (optimiser moments included), to a few per cent
+    from sasmi.gan.kinds.autoencoder import AUTOENCODER
+    from sasmi.gan.loop import checkpoint_bytes, resolve_config
+
+    cfg = resolve_config(AUTOENCODER, out, {}, resume=True)
+    phases = AUTOENCODER.build(cfg, {"real": real_chips / "targets"}, torch.device("cpu"))
+    assert checkpoint_bytes(phases.state) == pytest.approx((out / "checkpoints" / "last.pt").stat().st_size, rel=0.05)
