@@ -45,3 +45,5 @@ def test_chips_are_shrunk_by_area():
     images[:, :32] = 255
     small = resized(images, 32)
     assert small.shape == (2, 32, 32) and small[:, :16].min() == 1.0 and small[:, 16:].max() == 0.0
+    many = np.random.default_rng(0).integers(0, 256, (7, 64, 64), np.uint8)
+    np.testing.assert_array_equal(resized(many, 32, block=3), resized(many, 32, block=7))  # block by block: the same
