@@ -11,6 +11,30 @@ SHARED_CHIPS = REPO.parent / "shared" / "data" / "sonar-chips"
 FAILURES = REPO / "tests" / "_failures"
 
 
+def temporary_files(folder: Path) -> list[Path]:
+    """The temporary files of sasmi.images.atomic_path left under `folder`: a clean failure leaves none."""
+    return [p for p in folder.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]
+
+
+def disk_full_at(monkeypatch, under: Path, k: int | None = None) -> list[str]:
+    """Make the k-th rename into `under` (every one with k None) fail as a full disk does: every file sasmi writes
+    is committed by one rename (sasmi.images.atomic_path). Returns the renames seen."""
+    import errno
+    import os
+
+    seen, real_replace = [], os.replace
+
+    def replace(src, dst, *args, **kwargs):
+        if str(dst).startswith(str(under)):
+            seen.append(str(dst))
+            if k is None or len(seen) == k:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_replace(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", replace)
+    return seen
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _torch_one_thread():
     """Tiny tensors on a machine of few cores beside Dr.Jit's own threads: more torch threads only wait on each other."""

@@ -3,31 +3,15 @@ final name, and the rerun on a disk with room ends as an uninterrupted run. Ever
 one rename (sasmi.images.atomic_path); the disk fills at the k-th of them."""
 from __future__ import annotations
 
-import errno
 import json
-import os
 from pathlib import Path
 
 import pytest
 
+from conftest import disk_full_at, temporary_files
 from sasmi.cli.main import main
 
 PRESET = "cylinder_chip"
-
-
-def _disk_full_at(monkeypatch, under: Path, k: int) -> list[str]:
-    """Make the k-th rename into `under` fail as a full disk does; returns the renames seen."""
-    seen, real_replace = [], os.replace
-
-    def replace(src, dst, *args, **kwargs):
-        if str(dst).startswith(str(under)):
-            seen.append(str(dst))
-            if len(seen) == k:
-                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        return real_replace(src, dst, *args, **kwargs)
-
-    monkeypatch.setattr(os, "replace", replace)
-    return seen
 
 
 def _files(folder: Path) -> dict[str, bytes]:
@@ -43,16 +27,12 @@ def _one_line_no_space(capsys) -> str:
     return last
 
 
-def _no_temporary_files(folder: Path) -> None:
-    assert not [p for p in folder.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]
-
-
 def _fails_when_the_disk_fills(monkeypatch, capsys, command: list[str], out: Path, k: int) -> None:
     """`command` into `out` with the disk full at the k-th rename: one line, exit 2, no temporary file left."""
-    seen = _disk_full_at(monkeypatch, out, k)
+    seen = disk_full_at(monkeypatch, out, k)
     assert main([*command, "--out", str(out)]) == 2
     _one_line_no_space(capsys)
-    _no_temporary_files(out)
+    assert not temporary_files(out)
     assert len(seen) == k
     monkeypatch.undo()
 
@@ -69,7 +49,7 @@ def test_generate_and_export_on_a_full_disk(tmp_path, monkeypatch, capsys):
     assert main([*args, "--out", str(out)]) == 0  # the rerun completes the set
     assert _files(out) == _files(tmp_path / "whole")
 
-    _disk_full_at(monkeypatch, tmp_path / "cut.json", 1)
+    disk_full_at(monkeypatch, tmp_path / "cut.json", 1)
     capsys.readouterr()
     assert main(["export", str(out), "--format", "coco", "--out", str(tmp_path / "cut.json")]) == 2
     _one_line_no_space(capsys)
@@ -84,10 +64,10 @@ def test_generate_and_export_on_a_full_disk(tmp_path, monkeypatch, capsys):
 def test_evaluate_on_a_full_disk(tmp_path, monkeypatch, capsys, real_chips):
     args = ["evaluate", "--real", str(real_chips / "targets"), "--set", f"floors={real_chips / 'seafloor'}",
             "--bootstrap", "5", "--no-two-sample", "--no-cache"]
-    _disk_full_at(monkeypatch, tmp_path / "report", 2)
+    disk_full_at(monkeypatch, tmp_path / "report", 2)
     assert main([*args, "--out", str(tmp_path / "report")]) == 2
     _one_line_no_space(capsys)
-    _no_temporary_files(tmp_path / "report")
+    assert not temporary_files(tmp_path / "report")
     monkeypatch.undo()
     assert main([*args, "--out", str(tmp_path / "report")]) == 0
     assert (tmp_path / "report" / "report.md").is_file() and (tmp_path / "report" / "metrics.json").is_file()

@@ -7,6 +7,7 @@ import re
 import numpy as np
 import torch
 
+from conftest import disk_full_at, temporary_files
 from sasmi.realism import fit as fitting
 from sasmi.cli.main import main
 from sasmi.images import read_gray, write_gray
@@ -182,33 +183,18 @@ def _finished(out) -> bool:
             and (out / "report" / "report.md").is_file())
 
 
-def _temporary_files(out) -> list:
-    return [p for p in out.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]
-
-
 def test_a_full_disk_in_any_stage_of_fit_is_one_line_and_the_rerun_finishes(tmp_path, monkeypatch, capsys):
     """The disk fills at the first file each stage commits, one stage per run, each run resuming the last."""
-    import errno
-    import os
-
     argv = [*_fit_argv(tmp_path), "--out", str(tmp_path / "run")]
-    real_replace = os.replace
     for stage in ("phi", "renders", "sasgan", "translated", "report"):
-        under = str(tmp_path / "run" / stage)
-
-        def replace(src, dst, *args, **kwargs):
-            if str(dst).startswith(under):
-                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-            return real_replace(src, dst, *args, **kwargs)
-
-        monkeypatch.setattr(os, "replace", replace)
+        disk_full_at(monkeypatch, tmp_path / "run" / stage)
         assert main(argv) == 2, stage
         monkeypatch.undo()
         err = capsys.readouterr().err
         last = err.strip().split("\r")[-1].splitlines()[-1]
         assert "No space left on device" in last and "Traceback" not in err, err
-        assert not _temporary_files(tmp_path / "run"), stage
-        state = tmp_path / "run" / "fit.json"  # written after the first chunk of training
+        assert not temporary_files(tmp_path / "run"), stage
+        state = tmp_path / "run" / "fit.json"
         assert not state.exists() or stage not in json.loads(state.read_text())["done"], stage
     assert main(argv) == 0
     assert _finished(tmp_path / "run")
@@ -234,4 +220,4 @@ def test_kill_9_inside_any_stage_of_fit_and_the_rerun_finishes(tmp_path):
         assert mark.exists(), stage
     assert main(argv) == 0  # the lock died with the killed process: the rerun takes the folder
     assert _finished(out)
-    assert not _temporary_files(out)
+    assert not temporary_files(out)
