@@ -90,8 +90,8 @@ _TERMINATED: list[int] = []  # set by the handler: a library may wrap the except
 
 def _command_ended(prog: str, e: BaseException) -> int:
     what = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
-    print(f"{prog}: {what}; finished work is kept (render/generate/fit: rerun the same command; "
-          "train: add --resume)", file=sys.stderr)
+    how = "add --resume to continue" if prog == "sasmi train" else "rerun the same command to continue"
+    print(f"{prog}: {what}; finished work is kept: {how}", file=sys.stderr)
     return 143 if isinstance(e, Terminated) else 130
 
 

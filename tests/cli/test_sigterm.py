@@ -26,8 +26,7 @@ def test_a_render_terminated_midway_says_so_and_its_rerun_completes_the_same_set
     assert process.returncode == 128 + signal.SIGTERM, err
     assert "Traceback" not in err
     assert err.strip().split("\r")[-1].splitlines()[-1] == (
-        "sasmi render: terminated (SIGTERM); finished work is kept (render/generate/fit: rerun the same command; "
-        "train: add --resume)")
+        "sasmi render: terminated (SIGTERM); finished work is kept: rerun the same command to continue")
     assert len(list((tmp_path / "cut" / "labels").iterdir())) < 300  # stopped midway
     for out in ("cut", "whole"):
         subprocess.run([*command, "--out", str(tmp_path / out)], check=True, capture_output=True, timeout=300)
