@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from sasmi.eval.metrics import Estimate, _as_features, mean_known, one_blas_thread, replicates
+from sasmi.eval.metrics import Estimate, as_features, mean_known, one_blas_thread, replicates
 from sasmi.eval.neighbours import distance_blocks, kth_neighbour_radius, within_any_ball
 
 DENSE_BYTES = 256 * 2**20  # the real halves' replicates share one float32 N × N distance matrix up to this size
@@ -18,8 +18,8 @@ def precision_recall(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3)
     precision: fraction of fake samples inside some real sample's ball (radius = distance
     to its k-th nearest real neighbour); recall: the same with the roles swapped.
     """
-    real = _as_features(feats_real, k + 1, "precision_recall (real)")
-    fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
+    real = as_features(feats_real, k + 1, "precision_recall (real)")
+    fake = as_features(feats_fake, k + 1, "precision_recall (generated)")
     # in blocks of rows (sasmi.eval.neighbours): memory stays bounded at any set size
     precision = np.mean(on_manifold(fake, real, k))
     recall = np.mean(on_manifold(real, fake, k))
@@ -34,8 +34,8 @@ def precision_recall_matched(feats_real: np.ndarray, feats_fake: np.ndarray, k: 
     recall would fall the more chips one generated. Equal sizes, as in Kynkäänniemi et al.
     (50k and 50k) and as in the real→real row, make it a property of the distributions;
     precision's mean is unchanged."""
-    real = _as_features(feats_real, k + 1, "precision_recall (real)")
-    fake = _as_features(feats_fake, k + 1, "precision_recall (generated)")
+    real = as_features(feats_real, k + 1, "precision_recall (real)")
+    fake = as_features(feats_fake, k + 1, "precision_recall (generated)")
     m = min(len(real), len(fake))
     if len(real) == len(fake):
         n = 1  # nothing to draw: every replicate would be the same
@@ -51,7 +51,7 @@ def precision_recall_real_split(feats_real: np.ndarray, k: int = 3, n: int = 100
                                 seed: int = 0) -> tuple[Estimate, Estimate]:
     """Precision and recall of one random half of the real set against the other, over `n` splits:
     what a perfect generator reaches at the size that `precision_recall_matched` compares."""
-    x = _as_features(feats_real, 2 * (k + 1), "precision_recall_real_split")
+    x = as_features(feats_real, 2 * (k + 1), "precision_recall_real_split")
     rng = np.random.default_rng(seed)
     half = len(x) // 2
     if len(x) ** 2 * 4 <= DENSE_BYTES:  # every split's distances are in one matrix: computed once, not per split
@@ -91,8 +91,8 @@ def real_coverage(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n:
     m = min(|real|, |fake|) generated samples whose k-NN balls hold it: the matched size of
     `precision_recall_matched`, whose recall this averages to over the real set. 0: no draw of the
     generated set has a sample near this real one."""
-    real = _as_features(feats_real, 1, "real_coverage (real)")
-    fake = _as_features(feats_fake, k + 1, "real_coverage (generated)")
+    real = as_features(feats_real, 1, "real_coverage (real)")
+    fake = as_features(feats_fake, k + 1, "real_coverage (generated)")
     m = min(len(real), len(fake))
     if m == len(fake):
         n = 1  # every draw would be the whole generated set

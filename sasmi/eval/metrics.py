@@ -23,7 +23,7 @@ class Estimate:
     std: float  # spread of the resampled estimates (bootstrap, splits or subsets; see docs/evaluate.md)
 
 
-def _as_features(feats: np.ndarray, minimum: int, what: str) -> np.ndarray:
+def as_features(feats: np.ndarray, minimum: int, what: str) -> np.ndarray:
     x = np.asarray(feats, dtype=np.float64)
     if x.ndim != 2 or len(x) < minimum:
         raise SasmiError(f"{what}: needs at least {minimum} feature vectors (N, D), got shape {x.shape}")
@@ -55,8 +55,8 @@ def fid(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
     symmetric C Cᵀ, computed stably by SVD). No complex parts, no D×D sqrtm, exact when
     N < D (rank-deficient covariances), and at most N×N work per call.
     """
-    a = _as_features(feats_a, 2, "fid")
-    b = _as_features(feats_b, 2, "fid")
+    a = as_features(feats_a, 2, "fid")
+    b = as_features(feats_b, 2, "fid")
     if a.shape[1] != b.shape[1]:
         raise SasmiError(f"fid: feature dimensions differ ({a.shape[1]} vs {b.shape[1]})")
     return _fid_of(_cov_factor(a), _cov_factor(b))
@@ -80,7 +80,7 @@ def fid_mean_part(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
     """‖μa − μb‖², the part of `fid` that a shift of every feature vector by one offset would
     remove: what the two sets differ in on average (gray level, texture), as against how
     they spread (which scenes occur, their variety), the rest."""
-    a, b = _as_features(feats_a, 1, "fid_mean_part"), _as_features(feats_b, 1, "fid_mean_part")
+    a, b = as_features(feats_a, 1, "fid_mean_part"), as_features(feats_b, 1, "fid_mean_part")
     return float(np.sum((a.mean(0) - b.mean(0)) ** 2))
 
 
@@ -147,7 +147,7 @@ class RealSplits:
     each computed once: every set compared at size m meets the same splits and the same denominators."""
 
     def __init__(self, feats_real: np.ndarray, seed: int = 0):
-        self.real = _as_features(feats_real, 4, "real splits")
+        self.real = as_features(feats_real, 4, "real splits")
         self.half = len(self.real) // 2
         self.rng = np.random.default_rng([seed, 0])
         self.orders: list[np.ndarray] = []
@@ -195,7 +195,7 @@ def fid_ratio_matched(feats_set: np.ndarray, feats_real: np.ndarray, n: int = 10
     ratio is known to MC_ERROR. Sets given one seed (or one `splits`) meet the same splits, so the
     ratio of their ratios is free of the splits' noise.
     """
-    x = _as_features(feats_set, 2, "fid_ratio_matched (set)")
+    x = as_features(feats_set, 2, "fid_ratio_matched (set)")
     splits = splits or RealSplits(feats_real, seed)
     draw_rng = np.random.default_rng([seed, 1])
     m = min(splits.half, len(x))
@@ -236,8 +236,8 @@ def kid(feats_a: np.ndarray, feats_b: np.ndarray, subsets: int = 100, subset_siz
     Unbiased, so two samples of one distribution give ≈ 0 (and may give < 0) at any size.
     Subsets hold at most half the smaller set, so that they differ and the ± means something.
     """
-    a = _as_features(feats_a, 4, "kid")
-    b = _as_features(feats_b, 4, "kid")
+    a = as_features(feats_a, 4, "kid")
+    b = as_features(feats_b, 4, "kid")
     m = min(subset_size, min(len(a), len(b)) // 2)
     rng = np.random.default_rng(seed)
     with one_blas_thread():
@@ -248,7 +248,7 @@ def kid(feats_a: np.ndarray, feats_b: np.ndarray, subsets: int = 100, subset_siz
 
 def kid_real_split(feats_real: np.ndarray, subsets: int = 100, subset_size: int = 100, seed: int = 0) -> Estimate:
     """KID of real vs real: each subset pairs two disjoint random draws from the real set."""
-    x = _as_features(feats_real, 8, "kid_real_split")
+    x = as_features(feats_real, 8, "kid_real_split")
     m = min(subset_size, len(x) // 4)  # as in kid(): at most half of each half
     rng = np.random.default_rng(seed)
     reps = []
