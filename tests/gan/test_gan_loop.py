@@ -9,16 +9,13 @@ import numpy as np
 import pytest
 import torch
 
-from sasmi.gan.autoencoder import AutoencoderConfig, load_encoder
+from sasmi.gan.autoencoder import load_encoder
 from sasmi.gan.critic import Critic, CriticConfig
 from sasmi.gan.data import ImageSet
 from sasmi.gan.generator import GeneratorConfig
-from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
 from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
-from sasmi.gan.loop import train
 from sasmi.gan.losses import phi_loss
-from sasmi.images import write_gray
 from test_gan_train import toy_gan_inputs
 
 CPU = torch.device("cpu")

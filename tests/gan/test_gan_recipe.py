@@ -2,16 +2,13 @@
 import inspect
 from dataclasses import replace
 
-import numpy as np
 import pytest
 import torch
 
 from sasmi.gan.augment import AugmentConfig, augment
-from sasmi.gan.autoencoder import AutoencoderConfig
 from sasmi.gan.critic import Critic, CriticConfig
 from sasmi.gan.data import ImageSet
 from sasmi.gan.generator import GeneratorConfig, load_generator
-from sasmi.gan.kinds.autoencoder import AUTOENCODER, AutoencoderRun
 from sasmi.gan.kinds.common import GanRun, Noise, critic_phase, critic_view
 from sasmi.gan.kinds.sasgan import SASGAN, SasganRun
 from sasmi.gan.loop import train
@@ -20,7 +17,6 @@ from sasmi.eval.preservation import measure_image
 from sasmi.gan.losses import highlight_peaks, mask_contrast_loss, mask_contrasts, r1_penalty, shadow_outline, shadow_shape_loss
 from sasmi.labels import TargetLabel
 from sasmi.errors import SasmiError
-from sasmi.images import write_gray
 from test_gan_train import toy_gan_inputs
 
 CPU = torch.device("cpu")

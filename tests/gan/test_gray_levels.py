@@ -1,7 +1,5 @@
 """Gray levels: the generator's tone curve (monotone, the identity at first, one per chip) and the
 gray-level term (an energy distance between per-chip level distributions) that moves them toward real."""
-from dataclasses import replace
-
 import pytest
 import torch
 
