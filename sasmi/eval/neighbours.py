@@ -22,7 +22,8 @@ BLOCK_BYTES = 64 * 2**20  # one block of distances, and of rows; bounds memory a
 
 def _rows(x: np.ndarray, step: int, dtype, centre: float):
     for start in range(0, len(x), step):
-        yield start, np.asarray(x[start:start + step], dtype) - dtype(centre)
+        rows = np.asarray(x[start:start + step], dtype)  # a view when x is of dtype already (φ): no copy
+        yield start, rows - dtype(centre) if centre else rows
 
 
 def distance_blocks(query: np.ndarray, reference: np.ndarray):
