@@ -70,6 +70,25 @@ def phi_loss(phi_a: torch.Tensor, phi_b: torch.Tensor, margin: float) -> torch.T
     return (distance - margin).clamp_min(0.0).mean()
 
 
+def phi_distribution_loss(phi: torch.Tensor, real_mean: torch.Tensor, real_spread: torch.Tensor,
+                          spread_weight: float) -> torch.Tensor:
+    """How far a set's φ distribution lies from the real chips': the distance between the mean φ
+    vectors relative to the real mean's norm, plus `spread_weight` times the relative difference of
+    the spreads (the root mean over features of the variance across chips).
+
+    phi: (K, D) of K ≥ 2 chips; real_mean, real_spread: (D,), the real chips' mean and standard
+    deviation per feature. The set's variances are unbiased (K − 1), and their mean over D features
+    has little noise even for a few chips; the norm of per-feature differences would not do: with 4
+    chips each feature's spread is 40 % noise, and a fit minimising that norm shrinks the spread.
+    The mean alone cannot pin what changes how chips differ from each other but not their average.
+    """
+    assert phi.ndim == 2 and len(phi) >= 2 and real_mean.shape == real_spread.shape == phi.shape[1:], \
+        (phi.shape, real_mean.shape, real_spread.shape)
+    mean_term = (phi.mean(0) - real_mean).norm() / real_mean.norm().clamp_min(1e-8)
+    spread, real = phi.var(0).mean().sqrt(), real_spread.pow(2).mean().sqrt().clamp_min(1e-8)
+    return mean_term + spread_weight * (spread - real).abs() / real
+
+
 def reconstruction_loss(reconstruction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Mean squared error (the autoencoder's L2), images in [-1, 1]."""
     return ((reconstruction - target) ** 2).mean()

@@ -1,7 +1,7 @@
 """`sasmi fit-scene PRESET --phi RUN --real DIR --params a,b --steps N --out DIR`.
 
-Adjust scale factors on a preset's parameters by gradient descent so that the mean φ of its renders
-approaches the mean φ of real chips. Writes trajectory.csv, loss.png, fitted.toml (a preset for
+Adjust scale factors on a preset's parameters by gradient descent so that the φ of its renders is
+distributed as the φ of real chips (means and spreads). Writes trajectory.csv, loss.png, fitted.toml (a preset for
 `sasmi render`) and fit_scene.json. See docs/differentiable.md.
 """
 from __future__ import annotations
@@ -30,6 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"scenes of the preset rendered per step (default: {defaults.scenes})")
     p.add_argument("--lr", type=float, default=defaults.lr,
                    help=f"Adam rate on log-scales (default: {defaults.lr})")
+    p.add_argument("--spread-weight", type=float, default=defaults.spread_weight,
+                   help="weight of the φ spreads' term beside the means' (default: "
+                        f"{defaults.spread_weight}; 0: the mean φ alone)")
     p.add_argument("--seed", type=int, default=defaults.seed, help="preset draws and sample streams (default: 0)")
     p.add_argument("--no-speckle", dest="speckle", action="store_false",
                    help="fit noise-free renders (default: the preset's speckle and noise as fixed fields)")
@@ -40,6 +43,7 @@ def run_fit(args: argparse.Namespace) -> int:
     from sasmi.realism.fit_scene import FitConfig, fit_to_real, parse_params
 
     cfg = FitConfig(params=parse_params(args.params), steps=args.steps, lr=args.lr, scenes=args.scenes,
+                    spread_weight=args.spread_weight,
                     size=args.size, spp=args.spp, seed=args.seed, speckle=args.speckle)
     from sasmi.images import FolderLock
 

@@ -1,9 +1,9 @@
 """Fit scene parameters to real chips by gradient descent through the differentiable render.
 
 The loop renders K scenes of a preset with the current parameters, encodes them with the
-GAN's φ encoder and pulls the mean φ of the renders towards the mean φ of the real chips;
-the gradient reaches the parameters through `DifferentiableRenderer` (AD; central
-differences of the image for roughness and elevation, which move shadow edges). What moves
+GAN's φ encoder and pulls the φ distribution of the renders (mean and spread) towards that
+of the real chips; the gradient reaches the parameters through `DifferentiableRenderer` (AD;
+central differences of the image for roughness and elevation, which move shadow edges). What moves
 is a scale factor per parameter, 1 = the preset, so a preset whose fields are distributions
 keeps its spread and the fitted preset scales each field (docs/differentiable.md):
 
@@ -12,13 +12,10 @@ keeps its spread and the fitted preset scales each field (docs/differentiable.md
     sonar.intensity     source level                 → sonar.intensity
     sonar.elevation     altitude of the array        → sonar.altitude if set, else sonar.max_range
 
-Adam works on the logarithm of the scales, so every parameter moves by a similar relative
-step and stays positive. The loss is `sasmi.gan.losses.phi_loss` with margin 0: the distance
-between the two mean φ vectors relative to the real one. The render is noise-free apart
-from, by default, the preset's speckle and additive noise as fields fixed per scene (real
-chips have speckle; without it φ would compare smooth renders with speckled chips).
-
-Mitsuba, torch and matplotlib are imported inside the functions that use them.
+Adam works on the log-scales: relative steps, always positive. The loss is
+`phi_distribution_loss`: by the mean alone, roughness (how much the floor shades, which changes
+how chips differ more than their average) ends where it starts (docs/differentiable.md, *Loss*).
+The renders keep the preset's speckle and noise, fields fixed per scene: real chips have speckle.
 """
 from __future__ import annotations
 
@@ -60,7 +57,10 @@ class FitConfig:
     steps: int = 50  # Adam updates
     lr: float = 0.05  # on log-scales: at most ~5 % change per step; decays (cosine) to lr / 10 at the end
     betas: tuple[float, float] = (0.5, 0.9)  # Adam's; with β1 = 0.9 a fit of a few dozen steps overshoots and still rings at its end
-    scenes: int = 4  # scenes 0..K-1 of the preset, all rendered every step; their mean φ is matched
+    # scenes 0..K-1 of the preset, all rendered every step; their φ distribution is matched. With 4, which
+    # scenes were drawn moves a fitted roughness by about 20 %; with 8, 12 % (docs/results.md)
+    scenes: int = 8
+    spread_weight: float = 1.0  # the spreads' term beside the means'; 0: the mean φ alone
     size: int | None = None  # render size; None: the size the φ encoder was trained at (real chips are 128²)
     spp: int = 8  # samples per pixel of each render (and of its gradient)
     seed: int = 0  # preset draws (scene i = preset.sample(seed, i)); sampler seeds follow from it and the step
@@ -68,13 +68,15 @@ class FitConfig:
 
     def validate(self) -> "FitConfig":
         check_params(self.params)
-        for name, value, low in (("steps", self.steps, 1), ("scenes", self.scenes, 1), ("spp", self.spp, 1)):
+        for name, value, low in (("steps", self.steps, 1), ("scenes", self.scenes, 2), ("spp", self.spp, 1)):
             if value < low:
                 raise SasmiError(f"--{name}: {value} is not allowed (allowed: >= {low})")
         if self.size is not None:
             check_size(self.size, "--size")
         if not self.lr > 0:
             raise SasmiError(f"--lr: {self.lr} is not allowed (allowed: > 0)")
+        if not self.spread_weight >= 0:
+            raise SasmiError(f"--spread-weight: {self.spread_weight} is not allowed (allowed: >= 0)")
         return self
 
     def for_encoder(self, encoder) -> "FitConfig":
@@ -105,9 +107,7 @@ def parse_params(text: str) -> tuple[str, ...]:
     return check_params([p.strip() for p in text.split(",") if p.strip()])
 
 
-# ---------------------------------------------------------------------------------------
 # Scales ↔ preset
-# ---------------------------------------------------------------------------------------
 
 def _scale_value(value, scale: float, cap: float | None):
     """A preset value or distribution times `scale`, capped at `cap` (a distribution keeps its kind)."""
@@ -158,12 +158,10 @@ def scale_bounds(scenes: Sequence[Scene], params: Sequence[str]) -> tuple[np.nda
     return low, high
 
 
-# ---------------------------------------------------------------------------------------
 # φ target, gradient checks
-# ---------------------------------------------------------------------------------------
 
 def real_phi(encoder, folder: str | os.PathLike, size: int, batch: int = 32) -> np.ndarray:
-    """(D,) float64 mean φ of the real chips in `folder`, brought to `size` as the GAN's training does."""
+    """(N, D) float64 φ of the real chips in `folder`, brought to `size` as the GAN's training does."""
     import torch
 
     from sasmi.eval.features import load_images
@@ -174,7 +172,7 @@ def real_phi(encoder, folder: str | os.PathLike, size: int, batch: int = 32) -> 
     images = torch.from_numpy(load_images(paths, size))[:, None] * 2.0 - 1.0  # (N, 1, S, S) in [-1, 1]
     with torch.no_grad():
         phi = torch.cat([encoder(images[i:i + batch]) for i in range(0, len(images), batch)])  # (N, D)
-    return phi.double().mean(0).numpy()
+    return phi.double().numpy()
 
 
 def central_difference(f: Callable[[np.ndarray], float], x: np.ndarray, index: int, step: float) -> float:
@@ -185,9 +183,7 @@ def central_difference(f: Callable[[np.ndarray], float], x: np.ndarray, index: i
     return (f(plus) - f(minus)) / (2 * step)
 
 
-# ---------------------------------------------------------------------------------------
 # The fit
-# ---------------------------------------------------------------------------------------
 
 @contextlib.contextmanager
 def one_torch_thread():
@@ -208,10 +204,11 @@ def sampler_seed(seed: int, step: int, scene: int) -> int:
     return int(np.random.SeedSequence([seed, step, scene]).generate_state(1)[0] >> 1)
 
 def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, progress: bool = True) -> FitResult:
-    """Adam on the log-scales of `cfg.params` so that mean φ of K renders approaches `target_phi` (D,)."""
+    """Adam on the log-scales of `cfg.params` so that the φ of K renders is distributed as `target_phi`
+    (N, D), the φ of N ≥ 2 real chips."""
     import torch
 
-    from sasmi.gan.losses import phi_loss
+    from sasmi.gan.losses import phi_distribution_loss
     from sasmi.render.differentiable import DifferentiableRenderer, scene_parameters
 
     cfg = cfg.for_encoder(encoder).validate()
@@ -225,7 +222,10 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
     theta0 = torch.tensor(np.stack([scene_parameters(s) for s in scenes]), dtype=torch.float32)  # (K, 4)
     index = torch.tensor([PARAMETERS.index(p) for p in cfg.params])
     low, high = (torch.tensor(np.log(b), dtype=torch.float32) for b in scale_bounds(scenes, cfg.params))
-    target = torch.as_tensor(np.asarray(target_phi), dtype=torch.float32)[None]  # (1, D)
+    target = torch.as_tensor(np.asarray(target_phi), dtype=torch.float64)  # (N, D)
+    if target.ndim != 2 or len(target) < 2:
+        raise SasmiError(f"the real chips' φ: {tuple(target.shape)}; a distribution needs at least 2 chips")
+    real_mean, real_spread = target.mean(0).float(), target.std(0).float()  # (D,) each
 
     log_scale = torch.zeros(len(cfg.params), requires_grad=True)  # (P,); 0 = the preset
     opt = torch.optim.Adam([log_scale], lr=cfg.lr, betas=cfg.betas)
@@ -235,12 +235,12 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
     bar = tqdm(range(cfg.steps), desc="fit-scene", unit="step", disable=not progress, dynamic_ncols=True)
     with one_torch_thread():
         for step in bar:
-            # forward: K renders at θ0 · scale, their mean φ against the target
+            # forward: K renders at θ0 · scale, their φ distribution against the real chips'
             scale = torch.ones(len(PARAMETERS)).index_put((index,), log_scale.exp())  # (4,)
             images = torch.stack([renderer.image(b, theta0[k] * scale, sampler_seed(cfg.seed, step, k), wrt=cfg.params)
                                   for k, b in enumerate(bound)])  # (K, S, S) in [0, 1]
             phi = encoder(images[:, None] * 2.0 - 1.0)  # (K, D)
-            loss = phi_loss(target, phi.mean(0, keepdim=True), 0.0)
+            loss = phi_distribution_loss(phi, real_mean, real_spread, cfg.spread_weight)
             if not math.isfinite(loss.item()):
                 raise SasmiError(f"step {step}: the loss is not finite (scales {scale.tolist()}); lower --lr")
             # backward, update, keep the scenes valid
@@ -259,9 +259,7 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
     return FitResult(params=tuple(cfg.params), scales=final, trajectory=trajectory, seconds_per_step=seconds)
 
 
-# ---------------------------------------------------------------------------------------
 # Output: trajectory, loss curve, fitted preset
-# ---------------------------------------------------------------------------------------
 
 def preset_toml(raw: dict) -> str:
     """A preset dict as TOML laid out like scenes/*.toml: a [section] each, distributions inline."""
@@ -305,7 +303,7 @@ def loss_figure(result: FitResult, path: Path) -> None:
     fig = Figure(figsize=(9, 3.5))
     ax_loss, ax_scale = fig.subplots(1, 2)
     ax_loss.plot(steps, [row["loss"] for row in result.trajectory])
-    ax_loss.set(xlabel="step", ylabel="relative φ distance", yscale="log", title="loss")
+    ax_loss.set(xlabel="step", ylabel="relative φ distance (means + spreads)", yscale="log", title="loss")
     for name in result.params:
         ax_scale.plot(steps, [row[name] for row in result.trajectory], label=name)
     ax_scale.axhline(1.0, color="0.7", lw=0.8)
@@ -333,7 +331,7 @@ def write_fit(out: str | os.PathLike, preset: Preset, result: FitResult, record:
 
 def fit_to_real(preset_path: str | os.PathLike, phi_run: str | os.PathLike, real: str | os.PathLike,
                 cfg: FitConfig, out: str | os.PathLike, progress: bool = True) -> Path:
-    """One call: fit `cfg.params` of a preset so its renders match the real chips' mean φ; write OUT."""
+    """One call: fit `cfg.params` of a preset so its renders' φ is distributed as the real chips'; write OUT."""
     from sasmi.gan.autoencoder import load_encoder
     from sasmi.render.llvm import versions
     from sasmi.scene.preset import load_preset

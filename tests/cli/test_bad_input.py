@@ -377,8 +377,9 @@ def test_bad_crosscheck_flag(tmp_path, capsys, flags, name):
 
 @pytest.mark.parametrize("flags, name", [
     (["--steps", "0"], "--steps"), (["--lr", "nan"], "--lr"), (["--lr", "-1"], "--lr"), (["--spp", "0"], "--spp"),
-    (["--scenes", "0"], "--scenes"), (["--params", "bogus"], "bogus"), (["--size", "17"], "--size"),
-    (["--seed", "-1"], "--seed"), (["--real", "MISSING"], "--real"),
+    (["--scenes", "1"], "--scenes"), (["--params", "bogus"], "bogus"), (["--size", "17"], "--size"),
+    (["--seed", "-1"], "--seed"), (["--real", "MISSING"], "--real"), (["--spread-weight", "-1"], "--spread-weight"),
+    (["--spread-weight", "nan"], "--spread-weight"),
 ])
 def test_bad_fit_flag(tmp_path, capsys, inputs, flags, name):
     out = tmp_path / "out"

@@ -109,24 +109,24 @@ def test_scenes_add_up(renderer):
     np.testing.assert_allclose(grad([0, 1]), grad([0]) + grad([1]), rtol=1e-3, atol=1e-6)
 
 
-def test_recovers_roughness(encoder):
-    """From renders at roughness r*, a fit started at 0.5 r* lands within 10 % of r*."""
-    truth, start = relief_preset(0.02, 0.01), relief_preset(0.01, 0.005)
-    cfg = FitConfig(params=("seafloor.roughness",), steps=30, lr=0.1, scenes=2, size=SIZE, spp=SPP)
+@pytest.mark.parametrize("start", [0.3, 3.0])
+def test_recovers_roughness_from_far_starts(encoder, start):
+    """Chips of a known roughness r*, scenes the fit never renders, are the real chips; fits started at 0.3 r*
+    and 3 r* end within 15 % of r*."""
+    truth = relief_preset(0.02, 0.01)
+    cfg = FitConfig(params=("seafloor.roughness",), steps=40, lr=0.2, scenes=8, size=SIZE, spp=SPP)
     renderer = DifferentiableRenderer(SIZE, SPP)
     with torch.no_grad():
-        images = []
-        for k in range(cfg.scenes):
-            scene = truth.sample(cfg.seed, k)
-            images.append(renderer.image(renderer.bind(scene), torch.tensor(scene_parameters(scene)), 10_000 + k))
-        target = phi(encoder, torch.stack(images)).mean(0).numpy()
-    result = fit_scene(start, encoder, target, cfg, progress=False)
-    fitted = scaled_preset(start, result.scales)["seafloor"]
-    print(f"roughness scale {result.scales['seafloor.roughness']:.3f} (true 2), "
-          f"{result.seconds_per_step:.2f} s per step")
-    assert result.trajectory[-1]["loss"] < 0.5 * result.trajectory[0]["loss"]
-    assert fitted["rms_height"] == pytest.approx(0.02, rel=0.1)
-    assert fitted["ripple_amplitude"] == pytest.approx(0.01, rel=0.1)
+        scenes = [truth.sample(cfg.seed + 1, k) for k in range(8)]  # the fit renders scenes of cfg.seed
+        images = [renderer.image(renderer.bind(s), torch.tensor(scene_parameters(s)), 10_000 + k)
+                  for k, s in enumerate(scenes)]
+        target = phi(encoder, torch.stack(images)).numpy()  # (8, D)
+    result = fit_scene(relief_preset(0.02 * start, 0.01 * start), encoder, target, cfg, progress=False)
+    fitted = scaled_preset(relief_preset(0.02 * start, 0.01 * start), result.scales)["seafloor"]
+    print(f"from x{start}: roughness x{fitted['rms_height'] / 0.02:.3f}, {result.seconds_per_step:.2f} s per step")
+    assert result.trajectory[-1]["loss"] < 0.8 * result.trajectory[0]["loss"]
+    assert fitted["rms_height"] == pytest.approx(0.02, rel=0.15)
+    assert fitted["ripple_amplitude"] == pytest.approx(0.01, rel=0.15)
 
 
 def test_scaled_preset_keeps_distributions_and_limits(tmp_path):
@@ -188,7 +188,7 @@ def test_fit_scene_command(tmp_path, capsys):
     assert main(["train", "autoencoder", "--real", str(real), "--out", str(ae), "--size", "32", "--batch", "2",
                  "--steps", "2", "--device", "cpu"]) == 0
     assert main(["fit-scene", str(start), "--phi", str(ae), "--real", str(real), "--params",
-                 "seafloor.roughness,seafloor.albedo", "--steps", "3", "--scenes", "1", "--spp", "2",
+                 "seafloor.roughness,seafloor.albedo", "--steps", "3", "--scenes", "2", "--spp", "2",
                  "--out", str(fit)]) == 0
     lines = (fit / "trajectory.csv").read_text().splitlines()
     assert lines[0] == "step,loss,seafloor.roughness,seafloor.albedo" and len(lines) == 4
