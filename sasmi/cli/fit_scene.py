@@ -1,8 +1,8 @@
 """`sasmi fit-scene PRESET --phi RUN --real DIR --params a,b --steps N --out DIR`.
 
 Adjust scale factors on a preset's parameters by gradient descent so that the φ of its renders is
-distributed as the φ of real chips (means and spreads). Writes trajectory.csv, loss.png, fitted.toml (a preset for
-`sasmi render`) and fit_scene.json. See docs/differentiable.md.
+distributed as the φ of real chips (means and spreads). Writes trajectory.csv, loss.png,
+fitted.toml (a preset for `sasmi render`) and fit_scene.json. See docs/differentiable.md.
 """
 from __future__ import annotations
 

@@ -340,7 +340,10 @@ def fit_to_real(preset_path: str | os.PathLike, phi_run: str | os.PathLike, real
     preset = load_preset(preset_path)
     encoder = load_encoder(phi_run)
     cfg = cfg.for_encoder(encoder)
-    result = fit_scene(preset, encoder, real_phi(encoder, real, cfg.size), cfg, progress)
+    target = real_phi(encoder, real, cfg.size)
+    if len(target) < 2:
+        raise SasmiError(f"--real {real}: one chip; fit-scene matches a distribution of chips, give at least 2")
+    result = fit_scene(preset, encoder, target, cfg, progress)
     record = {"preset": str(Path(preset_path).resolve()), "phi": str(Path(phi_run).resolve()),
               "real": str(Path(real).resolve()), "config": asdict(cfg), "versions": versions()}
     return write_fit(out, preset, result, record)

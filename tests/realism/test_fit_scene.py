@@ -197,6 +197,13 @@ def test_fit_scene_command(tmp_path, capsys):
     capsys.readouterr()
     assert main(["render", str(fit / "fitted.toml"), "--count", "1", "--size", "16", "--spp", "1",
                  "--out", str(tmp_path / "again")]) == 0
+    one = tmp_path / "one"  # a distribution of one chip: refused in one line, nothing written
+    one.mkdir()
+    (real / "images" / "000000.png").rename(one / "000000.png")
+    assert main(["fit-scene", str(start), "--phi", str(ae), "--real", str(one), "--steps", "1", "--scenes", "2",
+                 "--spp", "1", "--out", str(tmp_path / "fit1")]) == 2
+    assert "--real" in capsys.readouterr().err
+    assert not (tmp_path / "fit1").exists() or not any((tmp_path / "fit1").iterdir())
 
 
 def test_ad_alone_gets_roughness_wrong_where_the_floor_shadows_itself(renderer):
