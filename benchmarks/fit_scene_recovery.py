@@ -16,7 +16,7 @@ import time
 import numpy as np
 import torch
 
-from sasmi.eval.features import load_images
+from sasmi.eval.features import phi_features
 from sasmi.gan.autoencoder import load_encoder
 from sasmi.images import list_images
 from sasmi.realism.fit_scene import FitConfig, fit_scene, scaled_preset
@@ -26,18 +26,13 @@ from sasmi.scene.preset import Preset, load_preset
 PARAMS = ("seafloor.roughness", "seafloor.albedo")
 
 
-def phi_of(encoder, images01: np.ndarray) -> np.ndarray:
-    with torch.no_grad():
-        return encoder(torch.from_numpy(images01).float()[:, None] * 2.0 - 1.0).double().numpy()
-
-
 def truth_phi(encoder, preset: Preset, count: int, size: int, spp: int) -> np.ndarray:
     """φ of `count` renders of scenes 0.. of the preset at seed 1 (fits render seed 0's)."""
     renderer = DifferentiableRenderer(size, spp)
     with torch.no_grad():
         images = [renderer.image(renderer.bind(s), torch.tensor(scene_parameters(s)), 10_000 + k).numpy()
                   for k, s in enumerate(preset.sample(1, k) for k in range(count))]
-    return phi_of(encoder, np.stack(images))
+    return phi_features(encoder, np.stack(images))
 
 
 def main() -> None:
@@ -61,7 +56,7 @@ def main() -> None:
         targets[f"{args.preset} renders"] = truth_phi(encoder, preset, 32, size, args.spp)
     if args.real:
         paths = [q for q in list_images(args.real) if fnmatch.fnmatch(q.name, args.match)]
-        targets[f"{len(paths)} real chips ({args.match})"] = phi_of(encoder, load_images(paths, size))
+        targets[f"{len(paths)} real chips ({args.match})"] = phi_features(encoder, paths)
     print(f"{args.steps} Adam steps, {args.scenes} scenes of {size} px, {args.spp} spp; scales of the truth "
           f"({args.preset}) for its renders, of {args.preset} for real chips", flush=True)
     for name, target in targets.items():
