@@ -21,8 +21,6 @@ import functools
 import json
 import math
 import os
-import time
-import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Iterator
@@ -34,7 +32,8 @@ from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, imag
 from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
-from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, knob, start_values
+from sasmi.realism.calibration_study import full_disk_named, open_study, run_batch
+from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
 
 SAMPLERS = ("cmaes", "tpe")
@@ -168,35 +167,6 @@ def best_valid(study, preset: Preset, cfg: CalibrateConfig, final: CalibrateConf
     raise SasmiError(f"no trial's preset draws {cfg.final_chips} valid scenes; rerun with a larger --minutes")
 
 
-def _study(out: Path, cfg: CalibrateConfig, x0: dict[str, float]):
-    import optuna
-
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    storage = optuna.storages.RDBStorage(f"sqlite:///{(out / 'study.db').resolve()}")
-    if cfg.sampler == "cmaes":
-        with warnings.catch_warnings():  # x0 (the start preset as CMA-ES's mean) is deprecated from Optuna 4.9 on,
-            warnings.simplefilter("ignore", FutureWarning)  # to go in 6.0 (pyproject pins optuna < 6)
-            sampler = optuna.samplers.CmaEsSampler(x0=x0, seed=cfg.seed, warn_independent_sampling=False)
-    else:
-        sampler = optuna.samplers.TPESampler(seed=cfg.seed, multivariate=True)
-    study = optuna.create_study(study_name="calibrate", storage=storage, sampler=sampler, direction="minimize",
-                                load_if_exists=True)
-    for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
-        storage.set_trial_state_values(t._trial_id, optuna.trial.TrialState.FAIL)  # a killed run's trial
-    if not study.trials:
-        study.enqueue_trial(x0)  # trial 0 is the start preset: the report's "before"
-    return study
-
-
-def _suggest(trial, names: tuple[str, ...]) -> dict[str, float]:
-    values = {}
-    for name in names:
-        k = knob(name)
-        low = max(k.low, 1e-6) if k.log else k.low
-        values[name] = trial.suggest_float(name, low, k.high, log=k.log)
-    return values
-
-
 def _check_record(out: Path, record: dict) -> None:
     path = out / "calibrate.json"
     if path.exists():
@@ -289,11 +259,14 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                                                              "real": str(Path(real_folder).resolve()),
                                                              "start": str(preset.path.resolve())}}
         _check_record(out, record)
-        study = _study(out, cfg, start_values(preset.raw, cfg.params))
+        x0 = start_values(preset.raw, cfg.params)
+        study = open_study(out, cfg, x0)
         stop = StopSignals()
         budget = cfg.minutes * 60
         with trial_runner(cfg, preset, real, encoder, phi) as (run, width), \
                 tqdm(total=round(budget), unit="s", desc="calibrate", disable=not progress or None) as bar:
+            with full_disk_named(out):
+                run_batch(study, preset, cfg, x0, run, 0)  # the trials a killed run asked: scored as asked
             while True:
                 spent, done = searched_seconds(study), len(study.trials)
                 bar.n = min(round(spent), round(budget))
@@ -307,7 +280,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                                                f"continue ({out}/study.db keeps every trial)")
                 with full_disk_named(out):
                     width_now = width if cfg.trials is None else min(width, cfg.trials - done)
-                    _batch(study, preset, cfg, run, width_now)
+                    run_batch(study, preset, cfg, x0, run, width_now)
             stop.restore()
             final = replace(cfg, seed=cfg.seed + 1)
             best_raw = best_valid(study, preset, cfg, final)
@@ -321,30 +294,3 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     finally:
         lock.release()
     return out
-
-
-def _batch(study, preset: Preset, cfg: CalibrateConfig, run, width: int) -> None:
-    """`width` trials asked, scored together and told; their wall time is added to the search time."""
-    from sasmi.realism.calibration_report import searched_seconds
-
-    start = time.perf_counter()
-    trials = [study.ask() for _ in range(width)]
-    scores = run([apply(preset.raw, _suggest(t, cfg.params)) for t in trials])
-    for trial, s in zip(trials, scores):
-        for key, value in s.items():
-            if key != "objective":
-                trial.set_user_attr(key, value)
-        study.tell(trial, s["objective"])
-    study.set_user_attr("seconds", searched_seconds(study) + time.perf_counter() - start)
-
-
-@contextlib.contextmanager
-def full_disk_named(out: Path) -> Iterator[None]:
-    """SQLite's own words for a full disk, through SQLAlchemy, as one line naming the study."""
-    try:
-        yield
-    except Exception as e:
-        if "disk is full" in str(e) or "disk I/O error" in str(e):
-            raise SasmiError(f"{out}/study.db: cannot write (the disk is full); free some space and rerun the "
-                             "same command to continue") from None
-        raise

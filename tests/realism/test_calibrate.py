@@ -149,6 +149,41 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
         calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "chips": 20}), out, progress=False)
 
 
+def test_a_calibration_killed_inside_a_trial_resumes_exactly(known, tmp_path, monkeypatch):
+    """Killed while a trial of CMA-ES's second generation renders, the rerun scores that trial as it was asked and
+    asks what an unbroken run asks: every trial's knobs and score alike."""
+    import optuna
+
+    import sasmi.realism.calibrate as calibrate_module
+
+    class Killed(BaseException):
+        pass
+
+    real, start = known
+    cfg = CalibrateConfig(params=("post.gain",), trials=10, chips=8, size=64, final_chips=8)
+    whole = calibrate(real, start, cfg, tmp_path / "whole", progress=False)
+    scored, calls = calibrate_module.trial_score, []
+
+    def dies_at_the_seventh(*args):
+        calls.append(1)
+        if len(calls) == 7:
+            raise Killed  # as kill -9: nothing told, the trial left asked
+        return scored(*args)
+
+    monkeypatch.setattr(calibrate_module, "trial_score", dies_at_the_seventh)
+    with pytest.raises(Killed):
+        calibrate(real, start, cfg, tmp_path / "cut", progress=False)
+    monkeypatch.setattr(calibrate_module, "trial_score", scored)
+    calibrate(real, start, cfg, tmp_path / "cut", progress=False)
+
+    def trials(out):
+        return [(t.state, t.params, t.value) for t in
+                optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}").trials]
+
+    assert trials(tmp_path / "cut") == trials(whole) and len(trials(whole)) == 10
+    assert (tmp_path / "cut" / "preset.toml").read_text() == (whole / "preset.toml").read_text()
+
+
 def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
     real, start = known
     for args, words in ((["--params", "post.gian"], "unknown parameter post.gian"),

@@ -1,0 +1,98 @@
+"""`sasmi calibrate`'s search: its Optuna study in RUN/study.db, asked and told in batches, resumed exactly.
+
+A rerun asks what an unbroken run asks: each trial's sampler is seeded by the study's seed and the trial's
+number (CMA-ES keeps its state in the study, not in the sampler), and the trials a killed run had asked
+are scored as they were asked.
+"""
+from __future__ import annotations
+
+import contextlib
+import time
+import warnings
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from sasmi.errors import SasmiError
+from sasmi.realism.preset_space import apply, knob
+from sasmi.scene.preset import Preset
+
+
+def sampler_for(cfg, x0: dict[str, float], number: int):
+    """The sampler that asks trial `number`, seeded by the seed and that number alone: a rerun asks exactly what an
+    unbroken run asks (CMA-ES keeps its state in the study, not in the sampler)."""
+    import optuna
+
+    seed = int(np.random.SeedSequence([cfg.seed, number]).generate_state(1)[0])
+    if cfg.sampler == "cmaes":
+        with warnings.catch_warnings():  # x0 (the start preset as CMA-ES's mean) is deprecated from Optuna 4.9 on,
+            warnings.simplefilter("ignore", FutureWarning)  # to go in 6.0 (pyproject pins optuna < 6)
+            return optuna.samplers.CmaEsSampler(x0=x0, seed=seed, warn_independent_sampling=False)
+    return optuna.samplers.TPESampler(seed=seed, multivariate=True)
+
+
+def open_study(out: Path, cfg, x0: dict[str, float]):
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = optuna.storages.RDBStorage(f"sqlite:///{(out / 'study.db').resolve()}")
+    study = optuna.create_study(study_name="calibrate", storage=storage, sampler=sampler_for(cfg, x0, 0),
+                                direction="minimize", load_if_exists=True)
+    if not study.trials:
+        study.enqueue_trial(x0)  # trial 0 is the start preset: the report's "before"
+    return study
+
+
+def interrupted_trials(study, cfg) -> list:
+    """The trials a killed run asked and never told: those whose knobs were all drawn, to be scored as asked;
+    the others failed."""
+    import optuna
+
+    asked = []
+    for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
+        if set(t.params) == set(cfg.params):
+            asked.append(optuna.trial.Trial(study, t._trial_id))
+        else:
+            study._storage.set_trial_state_values(t._trial_id, optuna.trial.TrialState.FAIL)
+    return asked
+
+
+def suggest(trial, names: tuple[str, ...]) -> dict[str, float]:
+    values = {}
+    for name in names:
+        k = knob(name)
+        low = max(k.low, 1e-6) if k.log else k.low
+        values[name] = trial.suggest_float(name, low, k.high, log=k.log)
+    return values
+
+
+def run_batch(study, preset: Preset, cfg, x0: dict[str, float], run, width: int) -> None:
+    """`width` trials asked (or those a killed run asked), scored together and told; their wall time is added to
+    the search time."""
+    from sasmi.realism.calibration_report import searched_seconds
+
+    start = time.perf_counter()
+    trials = interrupted_trials(study, cfg)
+    for _ in range(width - len(trials)):
+        study.sampler = sampler_for(cfg, x0, len(study.get_trials(deepcopy=False)))
+        trials.append(study.ask())
+    scores = run([apply(preset.raw, suggest(t, cfg.params)) for t in trials])
+    for trial, s in zip(trials, scores):
+        for key, value in s.items():
+            if key != "objective":
+                trial.set_user_attr(key, value)
+        study.tell(trial, s["objective"])
+    study.set_user_attr("seconds", searched_seconds(study) + time.perf_counter() - start)
+
+
+@contextlib.contextmanager
+def full_disk_named(out: Path) -> Iterator[None]:
+    """SQLite's own words for a full disk, through SQLAlchemy, as one line naming the study."""
+    try:
+        yield
+    except Exception as e:
+        if "disk is full" in str(e) or "disk I/O error" in str(e):
+            raise SasmiError(f"{out}/study.db: cannot write (the disk is full); free some space and rerun the "
+                             "same command to continue") from None
+        raise
