@@ -86,8 +86,11 @@ def floor_level(image01: np.ndarray, where: np.ndarray | None = None) -> np.ndar
         column = np.median(image01, axis=0)
     else:
         counts = where.sum(axis=0)
-        column = np.array([np.median(image01[where[:, c], c]) if counts[c] > 8 else np.nan
-                           for c in range(image01.shape[1])])
+        ranked = np.sort(np.where(where, image01, np.inf), axis=0)  # each column's pixels there first, in order
+        cols = np.arange(image01.shape[1])
+        low, high = ranked[np.maximum(counts - 1, 0) // 2, cols], ranked[np.minimum(counts // 2, len(ranked) - 1), cols]
+        column = np.where(counts % 2 == 1, high, (low + high) / 2)  # np.median's middle, or its two middle's mean
+        column = np.where(counts > 8, column, np.nan)
         column = np.where(np.isfinite(column), column, np.nanmedian(column) if np.isfinite(column).any() else 1.0)
     level = ndimage.uniform_filter1d(column, size=9, mode="nearest")
     return np.maximum(level, 1.0 / 255.0)

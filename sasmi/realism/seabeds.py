@@ -160,7 +160,9 @@ def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.nd
     for _ in range(IAAFT_ROUNDS):
         phase = np.angle(np.fft.rfft2(x))
         x = np.fft.irfft2(amplitude * np.exp(1j * phase), s=x.shape)
-        x = levels[np.argsort(np.argsort(x, axis=None))].reshape(x.shape)  # the levels back, in x's order
+        ranked = np.empty_like(levels)
+        ranked[np.argsort(x, axis=None)] = levels  # the levels back, in x's order
+        x = ranked.reshape(x.shape)
     return x
 
 

@@ -12,7 +12,7 @@ from scipy import ndimage, stats as sps
 from sasmi.cli.main import main
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
-from sasmi.chips.stats import chip_statistics, find_target, image_statistics, profile_swing
+from sasmi.chips.stats import chip_statistics, find_target, floor_level, image_statistics, profile_swing
 from sasmi.chips.compare import TOLERANCES, check, table
 
 SIZE = 128
@@ -194,3 +194,17 @@ def test_check_and_bad_input(tmp_path, capsys):
     assert main(["stats", str(a), "--size", "100"]) == 2
     assert main(["stats", str(tmp_path / "nowhere")]) == 2
     assert "nowhere" in capsys.readouterr().err
+
+
+def test_floor_level_over_a_mask_is_each_columns_median_there():
+    """Each column's median over the masked pixels (odd and even counts), the other columns' median where a column
+    has 8 or fewer, then smoothed along range: the definition, column by column."""
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        image, where = rng.random((40, 30)), rng.random((40, 30)) < rng.uniform(0.1, 0.9)
+        where[:, 3] = False  # a column with no floor pixel
+        column = np.array([np.median(image[where[:, c], c]) if where[:, c].sum() > 8 else np.nan for c in range(30)])
+        column[np.isnan(column)] = np.nanmedian(column)
+        expected = np.maximum(ndimage.uniform_filter1d(column, size=9, mode="nearest"), 1 / 255)
+        np.testing.assert_array_equal(floor_level(image, where), expected)
+
