@@ -54,6 +54,46 @@ def per_image_ms(images: int, warmup: int, size: int, spp: int) -> tuple[list[fl
     return times[warmup:], cpu[warmup:]
 
 
+def ray_floor_ms(size: int, spp: int, repeats: int = 5) -> float:
+    """A floor under which no renderer of the chip can go on this machine, in ms: the render's primary rays
+    (size² x spp, straight down through the chip) and one shadow ray from each hit to one of the 32 emitters,
+    traced by Mitsuba's own ray tracer in this process with nothing else computed (no light or BSDF sampling,
+    no film); the best of `repeats` on the first scene, after a warm-up."""
+    import numpy as np
+
+    from sasmi.render.geometry import build_geometry
+    from sasmi.render.mitsuba import Renderer
+    from sasmi.render.visibility import CAMERA_HEIGHT, aligned
+    from sasmi.scene.preset import load_preset
+
+    renderer = Renderer(size=size, spp=spp)
+    g = build_geometry(load_preset(PRESET).sample(0, 0), size)
+    renderer.prepare(g)
+    mi, dr, scene = renderer.mi, renderer.dr, renderer.mitsuba_scene
+    rng = np.random.default_rng(0)
+    n = size * size * spp
+    # pixel by pixel, row-major, each pixel's samples together, as the render's sampler orders them
+    cells = (np.arange(n) // spp).astype(np.float64)
+    x = 2.0 * (cells % size + rng.uniform(0.0, 1.0, n)) / size - 1.0
+    y = 2.0 * (cells // size + rng.uniform(0.0, 1.0, n)) / size - 1.0
+    lights = g.emitter_positions[rng.integers(len(g.emitter_positions), size=n)]
+    origin = mi.Point3f(aligned(x), aligned(y), aligned(np.full(n, CAMERA_HEIGHT)))
+    light = mi.Point3f(*(aligned(lights[:, k]) for k in range(3)))
+    dr.eval(origin, light)
+    times = []
+    for _ in range(repeats + 1):
+        start = time.perf_counter()
+        down = mi.Vector3f(0, 0, -1)
+        hit = origin + down * scene.ray_intersect_preliminary(mi.Ray3f(origin, down)).t
+        towards = light - hit
+        distance = dr.norm(towards)
+        blocked = scene.ray_test(mi.Ray3f(hit + 1e-4 * towards / distance, towards / distance, distance * 0.999))
+        dr.eval(blocked)
+        dr.sync_thread()
+        times.append((time.perf_counter() - start) * 1000)
+    return min(times[1:])
+
+
 def povray_ms(scene, size: int) -> tuple[float, float]:
     """Wall and CPU milliseconds of the `povray` process rendering `scene` as the cross-check does."""
     import resource
@@ -153,6 +193,9 @@ def main() -> None:
           f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}, "
           f"mean {statistics.mean(times):.0f}; {len(times)} images); "
           f"CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
+    floor = ray_floor_ms(args.size, args.spp)
+    print(f"ray-cast floor ({args.size}² x {args.spp} primary rays and as many shadow rays, Mitsuba's ray tracer "
+          f"alone): {floor:.0f} ms; the render is {statistics.median(times) / floor:.1f}x that")
     if not args.no_povray:
         from sasmi.scene.preset import load_preset
 
