@@ -101,9 +101,11 @@ def _evaluate(args, report, sets, encoder, cfg, log, cache_dir, device) -> Path:
     from sasmi.eval import sweeps
     from sasmi.eval.config import SweepConfig
     from sasmi.eval.evaluate import evaluate_folders
+    from sasmi.eval.stages import clear
 
     report += evaluate_folders(args.real, sets, encoder, args.out, cfg, log, cache_dir,
-                               statistics=functools.partial(median_statistics, size=encoder.image_size))
+                               statistics=functools.partial(median_statistics, size=encoder.image_size),
+                               resumable=True)  # a stopped evaluation's rerun goes on from its stage
     if args.preset is None:
         report += sweeps.skipped_pose_sweep("no --preset and --generator given")
     else:
@@ -112,4 +114,6 @@ def _evaluate(args, report, sets, encoder, cfg, log, cache_dir, device) -> Path:
                                               device)
     for warning in report.metrics["warnings"]:
         print(f"sasmi evaluate: warning: {warning}", file=sys.stderr)
-    return rep.write_report(args.out, report)
+    path = rep.write_report(args.out, report)
+    clear(args.out)
+    return path

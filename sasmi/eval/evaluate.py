@@ -24,6 +24,7 @@ from sasmi.eval.coverage import FIGURE as COVERAGE_FIGURE, coverage_metrics
 from sasmi.eval.features import FeatureSet, as_encoder, image_paths, load_set
 from sasmi.eval.neighbours import copying_metrics
 from sasmi.eval.preservation import target_preservation
+from sasmi.eval.stages import FOLDER, Stages, stages_key
 from sasmi.eval.two_sample import two_sample_markdown, two_sample_metrics
 from sasmi.eval.report import REAL_VS_REAL, Report, Section, copying_markdown, coverage_markdown, realism_markdown, \
     statistics_markdown, tsne_figure
@@ -57,14 +58,15 @@ def phi_fid(real: str | os.PathLike, fake: str | os.PathLike, phi=None, batch: i
 
 def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, out_dir: str | os.PathLike,
                      cfg: EvalConfig = EvalConfig(), log: Log = quiet, cache_dir: str | os.PathLike | None = None,
-                     statistics: Statistics | None = None) -> Report:
+                     statistics: Statistics | None = None, resumable: bool = False) -> Report:
     """φ of every folder, then `evaluate`, target preservation and (with `statistics`) the
     image-statistics table; figures go to out_dir.
 
     Folder sizes are checked before any φ is computed, so bad input fails at once. The real
     set's φ is cached in `cache_dir` (sasmi.eval.cache) when given: it is the set that stays
     the same from one evaluation to the next. Target preservation runs on every set with
-    masks/ and labels.jsonl, the real set included when it has them.
+    masks/ and labels.jsonl, the real set included when it has them. `resumable`: finished stages
+    are kept in out_dir (sasmi.eval.stages) for a rerun of a stopped evaluation; the caller clears them.
     """
     minimum = 2 * (cfg.pr_k + 1)  # two real halves, each with more than k neighbours
     n_real = len(image_paths(real))
@@ -75,14 +77,25 @@ def evaluate_folders(real: str | os.PathLike, sets: dict[str, Path], encoder, ou
         if n <= cfg.pr_k:
             raise SasmiError(f"{folder}: {n} images; at least {cfg.pr_k + 1} are needed")
     real_set = load_set("real", real, encoder, cfg.batch, cache_dir, log)
-    features = [load_set(name, folder, encoder, cfg.batch, log=log) for name, folder in sets.items()]
-    report = evaluate(real_set, features, out_dir, cfg, log)
-    log("target preservation")
-    report += target_preservation({"real": Path(real), **sets} if has_labels(real) else sets, out_dir)
+    kept = Path(out_dir) / FOLDER / "phi" if resumable else None
+    features = [load_set(name, folder, encoder, cfg.batch, kept, log) for name, folder in sets.items()]
+    stages = Stages(out_dir, stages_key(cfg, [real_set, *features])) if resumable else Stages(None)
+    report = evaluate(real_set, features, out_dir, cfg, log, stages)
+    report += _report(stages.get("preservation", lambda: _kept(target_preservation(
+        {"real": Path(real), **sets} if has_labels(real) else sets, out_dir)), log, "target preservation"))
     if statistics is not None:
-        log("image statistics")
-        report += image_statistics({"real": Path(real), **sets}, statistics)
+        report += _report(stages.get("statistics", lambda: _kept(image_statistics({"real": Path(real), **sets},
+                                                                                   statistics)),
+                                     log, "image statistics"))
     return report
+
+
+def _kept(report: Report) -> dict:
+    return {"metrics": report.metrics, "sections": [asdict(s) for s in report.sections]}
+
+
+def _report(kept: dict) -> Report:
+    return Report(kept["metrics"], tuple(Section(**s) for s in kept["sections"]))
 
 
 def image_statistics(folders: dict[str, Path], statistics: Statistics) -> Report:
@@ -96,8 +109,9 @@ def image_statistics(folders: dict[str, Path], statistics: Statistics) -> Report
 
 
 def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.PathLike,
-             cfg: EvalConfig = EvalConfig(), log: Log = quiet) -> Report:
-    """Realism table, coverage, copying detector and t-SNE of `sets` against `real`; figures go to out_dir."""
+             cfg: EvalConfig = EvalConfig(), log: Log = quiet, stages: Stages = Stages(None)) -> Report:
+    """Realism table, coverage, copying detector and t-SNE of `sets` against `real`; figures go to out_dir,
+    each stage's result to `stages` (kept there by a stopped run: not computed again)."""
     out_dir = Path(out_dir)
     dim = real.phi.shape[1]
     warnings = [f"{s.name}: {len(s.phi)} images, fewer than φ's {dim} dimensions: its covariance is "
@@ -107,19 +121,19 @@ def evaluate(real: FeatureSet, sets: Sequence[FeatureSet], out_dir: str | os.Pat
         warnings.append(f"{REAL_VS_REAL}: each half has {len(real.phi) // 2} images, fewer than φ's {dim} "
                         f"dimensions (see above)")
     with metrics.one_blas_thread():
-        log(f"realism: FID, its ratio, KID, precision/recall of {len(sets)} sets (at most {cfg.bootstrap} "
-            "replicates each)")
-        realism = realism_table(real, sets, cfg)
-        log("coverage: the real chips each set covers least")
-        coverage = coverage_metrics(real, sets, cfg, out_dir)
-        log("copying detector: nearest neighbours")
-        copying = copying_metrics(real, sets, cfg, out_dir)
-        log("t-SNE")
-        tsne_section = tsne_figure(*tsne_map(real, sets, cfg), out_dir / "tsne.png")
+        realism = stages.get("realism", lambda: realism_table(real, sets, cfg), log, "realism: FID, its ratio, KID, "
+                             f"precision/recall of {len(sets)} sets (at most {cfg.bootstrap} replicates each)")
+        coverage = stages.get("coverage", lambda: coverage_metrics(real, sets, cfg, out_dir), log,
+                              "coverage: the real chips each set covers least")
+        copying = stages.get("copying", lambda: copying_metrics(real, sets, cfg, out_dir), log,
+                             "copying detector: nearest neighbours")
+        tsne_section = Section(**stages.get("tsne", lambda: asdict(tsne_figure(*tsne_map(real, sets, cfg),
+                                                                                 out_dir / "tsne.png")), log, "t-SNE"))
     two_sample = {}
     if cfg.two_sample is not None:  # torch's own threads: outside the one-BLAS-thread block
-        log(f"two-sample test: a classifier against the real chips, {cfg.two_sample.folds} folds per set")
-        two_sample = two_sample_metrics(real, sets, cfg.two_sample, cfg.seed, out_dir)
+        two_sample = stages.get("two_sample", lambda: two_sample_metrics(real, sets, cfg.two_sample, cfg.seed, out_dir),
+                                log, f"two-sample test: a classifier against the real chips, {cfg.two_sample.folds} "
+                                     "folds per set")
     result = {"config": asdict(cfg), "phi_dim": dim, "image_size": int(real.images.shape[-1]),
               "real": {"dir": str(real.folder), "n": len(real.phi)},
               "sets": {s.name: {"dir": str(s.folder), "n": len(s.phi)} for s in sets},

@@ -288,3 +288,31 @@ def test_pose_sweep_through_mitsuba_and_a_trained_generator(data, tmp_path):
     assert len(sweep["translation"]) == 3 and len(sweep["rotation"]) == 3
     assert all(p["render"]["centroid_error_px"] < 4.0 for p in sweep["translation"])
     assert (tmp_path / "sweep_rotation.png").is_file()
+
+
+def test_an_evaluation_stopped_in_a_stage_goes_on_from_it_and_writes_the_unbroken_report(data, capsys, monkeypatch):
+    import sasmi.eval.evaluate as evaluation
+
+    args = ["--real", data.real, "--set", f"renders={data.renders}", "--set", f"shifted={data.shifted}",
+            "--phi", data.phi, "--bootstrap", 5, "--no-cache"]
+    unbroken, stopped = data.root / "unbroken", data.root / "stopped"
+    assert evaluate_cli(capsys, *args, "--out", unbroken)[0] == 0
+    copying = evaluation.copying_metrics
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt  # Ctrl-C in the copying detector, after realism and coverage
+
+    def again(*a, **k):
+        raise AssertionError("a finished stage computed again")
+
+    monkeypatch.setattr(evaluation, "copying_metrics", interrupted)
+    rc, err = evaluate_cli(capsys, *args, "--out", stopped)
+    assert rc == 130 and "rerun the same command to continue" in err and not (stopped / "report.md").exists()
+    monkeypatch.setattr(evaluation, "copying_metrics", copying)
+    monkeypatch.setattr(evaluation, "realism_table", again)
+    monkeypatch.setattr(evaluation, "coverage_metrics", again)
+    rc, err = evaluate_cli(capsys, *args, "--out", stopped)
+    assert rc == 0 and "coverage: the real chips each set covers least: kept from the stopped run" in err, err
+    assert (stopped / "metrics.json").read_text() == (unbroken / "metrics.json").read_text()
+    assert (stopped / "report.md").read_text() == (unbroken / "report.md").read_text()
+    assert not (stopped / ".stages").exists()  # the report written, nothing kept behind
