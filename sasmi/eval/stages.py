@@ -59,10 +59,10 @@ def _plain(x):
 
 
 def stages_key(cfg, sets: Sequence) -> str:
-    """A hash of the settings and of every FeatureSet's name, φ and pixels (the real set first)."""
+    """A hash of the settings and of every FeatureSet's name, folder, φ and pixels (the real set first)."""
     h = hashlib.sha256(json.dumps(asdict(cfg), sort_keys=True, default=str).encode())
     for s in sets:
-        h.update(s.name.encode())
+        h.update(f"{s.name}\t{Path(s.folder).resolve()}\n".encode())
         h.update(s.phi.tobytes())
         h.update(s.images.tobytes())
     return h.hexdigest()
