@@ -101,6 +101,7 @@ FLAGS: dict[str, Range] = {
                                           "a week is the most any plan needs"),
     "--trials": Range(1, 1_000_000, "search trials; each renders --chips scenes", int),
     "--chips": Range(8, 4096, "renders scored per trial; medians of fewer than 8 move with every draw", int),
+    "--refine-steps": Range(0, 10_000, "gradient steps after the search; each renders 8 scenes with their gradients", int),
     "--batch": Range(1, 1024, "one pass holds batch x size² activations per layer", int),
     "--steps": Range(1, 10_000_000, "training and fitting steps; 10^7 is weeks of GPU time", int),
     "--lr": Range(1e-8, 1.0, "Adam learning rates above 1 diverge at once; below 1e-8 float32 weights do not move"),

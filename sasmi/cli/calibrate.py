@@ -40,6 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="score trials on this Dask cluster instead (the run folder needs no shared disk)")
     p.add_argument("--phi", type=Path, metavar="RUN", help="φ autoencoder run or weights (default: the shipped φ)")
     p.add_argument("--seed", type=int, default=d.seed, help="preset draws of the trials (default: 0)")
+    p.add_argument("--refine-steps", type=int, default=d.refine_steps,
+                   help="then this many gradient steps (sasmi fit-scene) on relief, albedo and altitude, kept if they "
+                        f"lower the objective (default: {d.refine_steps})")
     p.set_defaults(run=run)
 
 
@@ -50,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     params = DEFAULT_KNOBS if args.params == "default" else tuple(p.strip() for p in args.params.split(",") if p.strip())
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
-                          workers=args.workers, scheduler=args.scheduler)
+                          workers=args.workers, scheduler=args.scheduler, refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")
     return 0

@@ -32,7 +32,7 @@ from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, imag
 from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
-from sasmi.realism.calibration_study import full_disk_named, open_study, run_batch
+from sasmi.realism.calibration_study import asked, full_disk_named, open_study, run_batch
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
 
@@ -41,6 +41,8 @@ FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one 
 FAILED = 1e3  # objective of a knob setting that makes no valid preset
 OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
 ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
+# what the gradient refines: the differentiable render's parameters but the source level, which post.gain searches
+REFINED = ("seafloor.roughness", "seafloor.albedo", "sonar.elevation")
 
 
 @dataclass(frozen=True)
@@ -57,20 +59,27 @@ class CalibrateConfig:
     seed: int = 0  # preset draws of the trials; the report's renders use seed + 1
     workers: int = 1  # local Dask processes scoring trials side by side (1: here, one after another)
     scheduler: str | None = None  # or an existing Dask cluster's address
+    # then this many steps of `sasmi fit-scene` (gradients through Mitsuba) from the calibrated preset on REFINED,
+    # kept only where they lower the objective on the report's renders (the gradient sees φ, not the statistics)
+    refine_steps: int = 0
 
     def validate(self) -> "CalibrateConfig":
         check_knobs(self.params)
         check_size(self.size, "--size")
         if self.sampler not in SAMPLERS:
             raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
+        if self.refine_steps < 0:
+            raise SasmiError(f"--refine-steps: {self.refine_steps} (allowed: >= 0)")
         if self.chips < 8 or self.final_chips < 8:
             raise SasmiError(f"--chips: {min(self.chips, self.final_chips)} (allowed: >= 8; medians of fewer "
                              "renders move with every draw)")
         return self
 
     def identity(self) -> dict:
-        """What a rerun must share to continue the study: everything but the budget and where trials run."""
-        return {k: v for k, v in asdict(self).items() if k not in ("minutes", "trials", "workers", "scheduler")}
+        """What a rerun must share to continue the study: everything but the budget, where trials run and what
+        follows the search."""
+        return {k: v for k, v in asdict(self).items()
+                if k not in ("minutes", "trials", "workers", "scheduler", "refine_steps")}
 
 
 @dataclass(frozen=True)
@@ -268,7 +277,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             with full_disk_named(out):
                 run_batch(study, preset, cfg, x0, run, 0)  # the trials a killed run asked: scored as asked
             while True:
-                spent, done = searched_seconds(study), len(study.trials)
+                spent, done = searched_seconds(study), asked(study)
                 bar.n = min(round(spent), round(budget))
                 if study.best_trials:
                     bar.set_postfix(trials=done, best=f"{study.best_value:.3g}")
@@ -290,7 +299,36 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)
             shown[name] = (images, final_score(images, real, encoder, cfg))
-        write_report(out, record, cfg, preset, best_raw, real, study, shown, pins)
+        refinement = None
+        if cfg.refine_steps:
+            best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
+                                                                shown["calibrated"], progress)
+        write_report(out, record, cfg, preset, best_raw, real, study, shown, pins, refinement)
     finally:
         lock.release()
     return out
+
+
+def refine(raw: dict, start: Preset, real: RealChips, encoder, cfg: CalibrateConfig, final: CalibrateConfig,
+           calibrated: tuple, progress: bool) -> tuple[dict, tuple, dict]:
+    """`cfg.refine_steps` of `sasmi fit-scene` (its φ distribution loss) from the calibrated preset `raw`:
+    (the preset, its report renders and score, what the refinement did), the refined preset only where it
+    lowers the objective of `calibrated` ((renders, score) of `raw`) on the same scenes."""
+    from sasmi.realism.fit_scene import FitConfig, fit_scene, scaled_preset
+
+    candidate = Preset.from_dict(raw, path=start.path)
+    fit_cfg = FitConfig(params=REFINED, steps=cfg.refine_steps, size=cfg.size, seed=cfg.seed)
+    if not any(s.seafloor.rms_height or s.seafloor.ripple_amplitude
+               for s in (candidate.sample(cfg.seed, i) for i in range(fit_cfg.scenes))):
+        fit_cfg = replace(fit_cfg, params=REFINED[1:])  # a flat floor has no relief to scale
+    fit = fit_scene(candidate, encoder, real.phi, fit_cfg, progress)
+    note = {"steps": cfg.refine_steps, "scales": fit.scales, "before": calibrated[1]["objective"], "after": None}
+    refined = scaled_preset(candidate, fit.scales)
+    try:
+        images = render_chips(Preset.from_dict(refined, path=start.path), cfg.final_chips, final, final.seed)
+    except SasmiError as e:  # a scaled relief or altitude that breaks a rule in some scene
+        return raw, calibrated, {**note, "kept": False, "invalid": str(e)}
+    score = final_score(images, real, encoder, cfg)
+    note.update(after=score["objective"], kept=score["objective"] < note["before"])
+    return (refined, (images, score), note) if note["kept"] else (raw, calibrated, note)
+

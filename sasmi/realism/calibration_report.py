@@ -65,13 +65,27 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str
     return lines
 
 
-def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str, float]) -> str:
+def refinement_lines(refinement: dict | None) -> list[str]:
+    if not refinement:
+        return []
+    scales = ", ".join(f"{p} x {s:.3g}" for p, s in refinement["scales"].items())
+    after = "invalid: " + refinement["invalid"] if refinement.get("invalid") else f"{refinement['after']:.3g}"
+    return [f"Gradient refinement, {refinement['steps']} steps of `sasmi fit-scene` from the calibrated preset: "
+            f"{scales}; objective on these renders {refinement['before']:.3g} -> {after}: "
+            f"{'kept (the calibrated column above)' if refinement['kept'] else 'not kept'}.", ""]
+
+
+def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str, float],
+                refinement: dict | None = None) -> str:
     from sasmi.realism.fit_scene import preset_toml
 
     before = start_values(start.raw, cfg.params)
     header = [f"# Calibrated by `sasmi calibrate` from {Path(record['start']).name} to the chips of "
               f"{record['real']}", f"# ({len(cfg.params)} knobs; docs/calibrate.md). Start -> calibrated:"]
     header += [f"#   {n}: {before[n]:.4g} -> {best_values[n]:.4g}" for n in cfg.params]
+    if refinement and refinement["kept"]:
+        header += ["# then refined by gradients (sasmi fit-scene): "
+                   + ", ".join(f"{p} x {s:.3g}" for p, s in refinement["scales"].items())]
     return "\n".join(header) + "\n" + preset_toml(best_raw)
 
 
@@ -140,12 +154,12 @@ def sheet_figure(real, shown: dict, path: Path) -> None:
 
 
 def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict,
-                 pins: dict[str, dict]) -> None:
+                 pins: dict[str, dict], refinement: dict | None = None) -> None:
     import json
 
     best = study.trials[study.user_attrs["calibrated_trial"]]
     write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
-    write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params))
+    write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params, refinement))
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
     ratio = {n: f"{s['phi_ratio']:.2f} ± {s['phi_ratio_std']:.2f}" for n, (_, s) in shown.items()}
@@ -159,6 +173,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"φ-FID ratio to the real chips (1 = as close as real chips to each other): start {ratio['start']}, "
         f"calibrated {ratio['calibrated']}.", "",
         *statistics_table(real, shown), "",
+        *refinement_lines(refinement),
         *sensitivity_lines(pins, best.params), "",
         "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
         "search: `objective.png`.", "",

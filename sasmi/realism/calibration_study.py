@@ -44,6 +44,13 @@ def open_study(out: Path, cfg, x0: dict[str, float]):
     return study
 
 
+def asked(study) -> int:
+    """Trials asked so far: the start preset waits in the queue until the first is asked."""
+    import optuna
+
+    return sum(t.state != optuna.trial.TrialState.WAITING for t in study.get_trials(deepcopy=False))
+
+
 def interrupted_trials(study, cfg) -> list:
     """The trials a killed run asked and never told: those whose knobs were all drawn, to be scored as asked;
     the others failed."""

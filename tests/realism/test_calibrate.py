@@ -3,11 +3,11 @@ recovers a known preset's gain from its own renders, continues when rerun and re
 from __future__ import annotations
 
 import json
-
 import math
 import subprocess
 import sys
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -182,6 +182,26 @@ def test_a_calibration_killed_inside_a_trial_resumes_exactly(known, tmp_path, mo
 
     assert trials(tmp_path / "cut") == trials(whole) and len(trials(whole)) == 10
     assert (tmp_path / "cut" / "preset.toml").read_text() == (whole / "preset.toml").read_text()
+
+
+def test_gradient_refinement_is_kept_only_where_it_lowers_the_objective(known, tmp_path, monkeypatch):
+    """One trial leaves the start's gain (2.5 x the truth's); a refinement that darkens the floor by that much is
+    kept and written, one that brightens it further is not. Then fit-scene itself, one step, end to end."""
+    import sasmi.realism.fit_scene as fit_scene_module
+    from sasmi.realism.fit_scene import FitResult
+
+    real, start = known
+    cfg = CalibrateConfig(params=("post.gain",), trials=1, chips=16, size=64, final_chips=16, refine_steps=3)
+    for factor, kept in ((0.4, True), (2.5, False)):
+        scales = {"seafloor.roughness": 1.0, "seafloor.albedo": factor, "sonar.elevation": 1.0}
+        monkeypatch.setattr(fit_scene_module, "fit_scene", lambda *a, **k: FitResult(tuple(scales), scales, [], 0.0))
+        out = calibrate(real, start, cfg, tmp_path / f"x{factor}", progress=False)
+        report, albedo = (out / "report.md").read_text(), load_preset(out / "preset.toml").raw["seafloor"]["albedo"]
+        assert "Gradient refinement, 3 steps" in report and ("kept (the calibrated column" in report) == kept
+        assert albedo == pytest.approx(0.5 * factor if kept else 0.5)
+    monkeypatch.undo()
+    out = calibrate(real, start, replace(cfg, refine_steps=1), tmp_path / "x0.4", progress=False)  # its search done
+    assert "Gradient refinement, 1 steps" in (out / "report.md").read_text()
 
 
 def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
