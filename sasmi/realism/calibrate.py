@@ -331,4 +331,3 @@ def refine(raw: dict, start: Preset, real: RealChips, encoder, cfg: CalibrateCon
     score = final_score(images, real, encoder, cfg)
     note.update(after=score["objective"], kept=score["objective"] < note["before"])
     return (refined, (images, score), note) if note["kept"] else (raw, calibrated, note)
-
