@@ -1,5 +1,6 @@
 """Render speed and memory: ms/image at 256², 32 emitters, 16 spp (labels and PNG writing
-included), median over >= 20 images after warm-up, wall and CPU time (all threads); POV-Ray's
+included), median over >= 20 images after warm-up, wall and CPU time (all threads); the same rays
+cast by Mitsuba alone, and the render's scene update and launch, for the ratio; POV-Ray's
 time for the first of those scenes, as `sasmi crosscheck` traces it, beside it; the throughput
 of `sasmi render` itself in ms/chip with --workers 1 and 2 (the chips of a long run over the
 chips of a short one, so start-up and compilation cancel); and peak RSS of `sasmi render` for
@@ -54,11 +55,13 @@ def per_image_ms(images: int, warmup: int, size: int, spp: int) -> tuple[list[fl
     return times[warmup:], cpu[warmup:]
 
 
-def ray_floor_ms(size: int, spp: int, repeats: int = 5) -> float:
-    """A floor under which no renderer of the chip can go on this machine, in ms: the render's primary rays
-    (size² x spp, straight down through the chip) and one shadow ray from each hit to one of the 32 emitters,
-    traced by Mitsuba's own ray tracer in this process with nothing else computed (no light or BSDF sampling,
-    no film); the best of `repeats` on the first scene, after a warm-up."""
+def ray_cast_ms(size: int, spp: int, repeats: int = 5) -> tuple[float, float, float]:
+    """(ray cast, scene update, launch) ms on the first scene, the best of `repeats` after a warm-up.
+
+    Ray cast: the render's primary rays (size² x spp, straight down through the chip) and one shadow ray from
+    each hit to one of the 32 emitters, traced by Mitsuba's ray tracer in this process in two passes, nothing
+    else computed: the machine's own rate for those rays. The render's launch fuses its rays with light sampling
+    and the film in one kernel; the scene update is what a new chip costs before it (Embree rebuilds its BVH)."""
     import numpy as np
 
     from sasmi.render.geometry import build_geometry
@@ -80,6 +83,17 @@ def ray_floor_ms(size: int, spp: int, repeats: int = 5) -> float:
     origin = mi.Point3f(aligned(x), aligned(y), aligned(np.full(n, CAMERA_HEIGHT)))
     light = mi.Point3f(*(aligned(lights[:, k]) for k in range(3)))
     dr.eval(origin, light)
+
+    def best(f) -> float:
+        times = []
+        for _ in range(repeats + 1):
+            start = time.perf_counter()
+            f()
+            times.append((time.perf_counter() - start) * 1000)
+        return min(times[1:])
+
+    update = best(lambda: (renderer.prepare(g), dr.sync_thread()))
+    launch = best(lambda: renderer.collect(renderer.launch(0)))
     times = []
     for _ in range(repeats + 1):
         start = time.perf_counter()
@@ -91,7 +105,7 @@ def ray_floor_ms(size: int, spp: int, repeats: int = 5) -> float:
         dr.eval(blocked)
         dr.sync_thread()
         times.append((time.perf_counter() - start) * 1000)
-    return min(times[1:])
+    return min(times[1:]), update, launch
 
 
 def povray_ms(scene, size: int) -> tuple[float, float]:
@@ -193,9 +207,10 @@ def main() -> None:
           f"median {statistics.median(times):.0f} ms/image (p10 {q[0]:.0f}, p90 {q[-1]:.0f}, "
           f"mean {statistics.mean(times):.0f}; {len(times)} images); "
           f"CPU median {statistics.median(cpu):.0f}, mean {statistics.mean(cpu):.0f} ms/image")
-    floor = ray_floor_ms(args.size, args.spp)
-    print(f"ray-cast floor ({args.size}² x {args.spp} primary rays and as many shadow rays, Mitsuba's ray tracer "
-          f"alone): {floor:.0f} ms; the render is {statistics.median(times) / floor:.1f}x that")
+    rays, update, launch = ray_cast_ms(args.size, args.spp)
+    print(f"ray cast ({args.size}² x {args.spp} primary rays and as many shadow rays, Mitsuba's ray tracer alone): "
+          f"{rays:.0f} ms; the render is {statistics.median(times) / rays:.1f}x that. Of the render: scene update "
+          f"{update:.0f} ms, launch (rays, light sampling, film) {launch:.0f} ms")
     if not args.no_povray:
         from sasmi.scene.preset import load_preset
 
