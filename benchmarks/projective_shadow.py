@@ -53,10 +53,9 @@ def main() -> None:
     p.add_argument("--seeds", type=int, default=2)
     p.add_argument("--spp", type=int, default=64)
     args = p.parse_args()
-    import drjit as dr
-    import mitsuba as mi
+    from sasmi.render.llvm import import_mitsuba
 
-    mi.set_variant("llvm_ad_mono")
+    mi, dr = import_mitsuba()  # sasmi's variant and libLLVM, as every render
     for name, integrator in INTEGRATORS.items():
         scene = mi.load_dict(scene_dict(integrator, args.spp))
         params = mi.traverse(scene)

@@ -318,8 +318,7 @@ def refine(raw: dict, start: Preset, real: RealChips, encoder, cfg: CalibrateCon
 
     candidate = Preset.from_dict(raw, path=start.path)
     fit_cfg = FitConfig(params=REFINED, steps=cfg.refine_steps, size=cfg.size, seed=cfg.seed)
-    if not any(s.seafloor.rms_height or s.seafloor.ripple_amplitude
-               for s in (candidate.sample(cfg.seed, i) for i in range(fit_cfg.scenes))):
+    if not any(candidate.sample(cfg.seed, i).seafloor.has_relief for i in range(fit_cfg.scenes)):
         fit_cfg = replace(fit_cfg, params=REFINED[1:])  # a flat floor has no relief to scale
     fit = fit_scene(candidate, encoder, real.phi, fit_cfg, progress)
     note = {"steps": cfg.refine_steps, "scales": fit.scales, "before": calibrated[1]["objective"], "after": None}

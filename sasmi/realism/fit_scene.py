@@ -213,8 +213,7 @@ def fit_scene(preset: Preset, encoder, target_phi: np.ndarray, cfg: FitConfig, p
 
     cfg = cfg.for_encoder(encoder).validate()
     scenes = [preset.sample(cfg.seed, i) for i in range(cfg.scenes)]
-    if "seafloor.roughness" in cfg.params and not any(s.seafloor.rms_height or s.seafloor.ripple_amplitude
-                                                      for s in scenes):
+    if "seafloor.roughness" in cfg.params and not any(s.seafloor.has_relief for s in scenes):
         raise SasmiError("seafloor.roughness: the preset's seafloor is flat (rms_height = ripple_amplitude = 0), "
                          "there is no relief to scale")
     renderer = DifferentiableRenderer(cfg.size, cfg.spp)

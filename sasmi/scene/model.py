@@ -87,6 +87,11 @@ class Seafloor:
                              "0 = uniform; above 2 most of the floor renders black")
     patch_size: float = spec(1.0, positive, "> 0", "m; width (FWHM) of the patches of stronger and weaker backscatter")
 
+    @property
+    def has_relief(self) -> bool:
+        """Rough or rippled: a floor whose relief can be scaled (flat when both heights are 0)."""
+        return bool(self.rms_height or self.ripple_amplitude)
+
 
 @dataclass(frozen=True)
 class Target:

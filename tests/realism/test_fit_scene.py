@@ -166,6 +166,13 @@ def test_bad_params_name():
     assert parse_params(" sonar.elevation , seafloor.albedo") == ("sonar.elevation", "seafloor.albedo")
 
 
+def test_roughness_of_a_flat_floor_is_refused_and_a_rippled_one_has_relief(encoder):
+    target = np.zeros((2, 1024))
+    with pytest.raises(SasmiError, match="seafloor.roughness: the preset's seafloor is flat"):
+        fit_scene(relief_preset(0.0, 0.0), encoder, target, FitConfig(steps=1, scenes=2, size=SIZE, spp=1))
+    assert relief_preset(0.0, 0.01).sample(0, 0).seafloor.has_relief  # ripples alone are relief too
+
+
 def test_bad_params_on_the_command_line(tmp_path, capsys):
     out = tmp_path / "fit"
     argv = ["fit-scene", str(REPO / "scenes" / "seafloor_only.toml"), "--phi", str(tmp_path), "--real",
