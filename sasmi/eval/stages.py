@@ -40,8 +40,9 @@ class Stages:
         log(what)
         value = compute()
         if path is not None:
-            write_text(path, json.dumps({"key": self.key, "value": value}, default=_plain))
-            return json.loads(path.read_text())["value"]  # as a rerun will read it: one report either way
+            text = json.dumps({"key": self.key, "value": value}, default=_plain)
+            write_text(path, text)
+            return json.loads(text)["value"]  # as a rerun will read it: one report either way
         return value
 
 
