@@ -5,8 +5,8 @@
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
 knob for --minutes, and the table compares each knob's calibrated value with the truth beside the
-report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json). Rerunning continues
-the calibration.
+report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and held by
+every trial as good as the best). Rerunning continues the calibration.
 """
 from __future__ import annotations
 
@@ -54,15 +54,19 @@ def main() -> int:
     for table in (before, truth, got):  # targets.size scales burial too: the burial knob is what is left
         table["targets.burial"] /= table["targets.size"]
     print("| knob | start | truth | calibrated | off by | pinned by the chips |\n|---|---|---|---|---|---|")
-    misses = []
+    misses, untold = [], []
+    verdicts = {True: "yes", False: "no", None: "too few trials to tell"}
     for name in DEFAULT_KNOBS:
         off = abs(got[name] - truth[name]) / max(abs(truth[name]), 1e-9)
         pinned = pins[name]["pinned"]
         if pinned and off > RECOVERED:
             misses.append(name)
+        if pinned is None:
+            untold.append(name)
         print(f"| {name} | {before[name]:.4g} | {truth[name]:.4g} | {got[name]:.4g} | "
-              f"{'—' if math.isinf(off) else f'{off:.0%}'} | {'yes' if pinned else 'no'} |")
-    print(f"pinned knobs off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}")
+              f"{'—' if math.isinf(off) else f'{off:.0%}'} | {verdicts[pinned]} |")
+    print(f"pinned knobs off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}; "
+          f"{len(untold)} knobs the search was too short to judge")
     return 0
 
 

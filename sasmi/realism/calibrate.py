@@ -39,6 +39,7 @@ from sasmi.scene.preset import Preset, load_preset
 SAMPLERS = ("cmaes", "tpe")
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
 FAILED = 1e3  # objective of a knob setting that makes no valid preset
+FRESH_DRAWS = 4  # other draws of the trials' scenes the calibrated preset is scored on: how well it really scores
 OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
 ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
 # what the gradient refines: the differentiable render's parameters but the source level, which post.gain searches
@@ -253,7 +254,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     from sasmi.eval.features import as_encoder, describe_phi
     from sasmi.gan.loop import StopSignals
     from sasmi.images import FolderLock
-    from sasmi.realism.calibration_report import searched_seconds, sensitivity, write_report
+    from sasmi.realism.calibration_report import searched_seconds, sensitivity, trade_offs, write_report
 
     cfg = cfg.validate()
     out = Path(out)
@@ -293,8 +294,12 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             stop.restore()
             final = replace(cfg, seed=cfg.seed + 1)
             best_raw = best_valid(study, preset, cfg, final)
-            pins = sensitivity(study.trials[study.user_attrs["calibrated_trial"]].params, lambda settings: [
-                s["objective"] for s in run([apply(preset.raw, values) for values in settings])])
+            best = study.trials[study.user_attrs["calibrated_trial"]]
+            fresh = [trial_score(best_raw, preset.path, real, replace(cfg, seed=cfg.seed + 2 + k), encoder)["objective"]
+                     for k in range(FRESH_DRAWS)]  # what the calibrated preset scores on scenes it was not fitted to
+            pins = trade_offs(sensitivity(best.params, lambda settings: [
+                s["objective"] for s in run([apply(preset.raw, values) for values in settings])]),
+                [(t.value, t.params) for t in study.trials if t.value is not None], best.params, best.value, fresh)
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)

@@ -18,7 +18,9 @@ from sasmi.realism.preset_space import start_values
 
 SHOWN = 6  # chips per column of the sheet
 STEP = 0.2  # each knob is moved alone by this share of its search range (on its search scale), down and up ...
-RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average
+RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average,
+SPAN = 0.15  # ... and every trial within RISE of the calibrated objective holds it within this share of its value
+AS_GOOD = 10  # trials within RISE needed before their spread can show knobs that trade against each other
 
 
 def searched_seconds(study) -> float:
@@ -47,21 +49,53 @@ def sensitivity(best: dict[str, float], objectives_of) -> dict[str, dict]:
     for i, name in enumerate(moves):
         rise = float(np.mean(moved[2 * i:2 * i + 2]) - base)
         result[name] = {"moved": moves[name], "rise": rise, "share": rise / max(base, 1e-12),
-                        "pinned": rise >= RISE * base}
+                        "alone": rise >= RISE * base}
+    return result
+
+
+def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], best_value: float,
+               fresh: list[float]) -> dict[str, dict]:
+    """`sensitivity`'s pins with what the search itself saw: each knob's range over the trials (objective,
+    knobs) that score as well as the calibrated preset (`best_value`) does on `fresh` draws of the search's
+    scene count, or on its own if that is worse. A search fits its own scenes' draws: the calibrated trial
+    mostly scores lower on them than on other draws, and within that spread no trial is better than another. Knobs that trade (gain against albedo, chip size
+    against target size) each move the objective alone, yet along their ridge other values score as well.
+    pinned: True where a knob moves the objective alone and every such trial holds it within SPAN of its
+    calibrated value, False where it does not, None where fewer than AS_GOOD trials are that good to tell."""
+    level = max(float(np.mean(fresh)), best_value)
+    good = [knobs for value, knobs in trials if value <= level * (1 + RISE)]
+    result = {}
+    for name, p in pins.items():
+        values = [knobs[name] for knobs in good if name in knobs] or [best[name]]
+        low, high = float(min(values)), float(max(values))
+        held = bool(max(high - best[name], best[name] - low) <= SPAN * abs(best[name]))
+        pinned = (held if len(good) >= AS_GOOD else None) if p["alone"] else False
+        result[name] = {**p, "as_good": [low, high], "as_good_trials": len(good), "fresh": [float(f) for f in fresh],
+                        "pinned": pinned}
     return result
 
 
 def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str]:
-    loose = [n for n, p in pins.items() if not p["pinned"]]
+    loose = [n for n, p in pins.items() if not p["alone"]]
+    traded = [n for n, p in pins.items() if p["alone"] and p["pinned"] is False]
+    count, fresh = (next(iter(pins.values()))[k] for k in ("as_good_trials", "fresh")) if pins else (0, [0.0])
+    verdict = {True: "yes", False: "**no**", None: "too few trials to tell"}
     lines = [f"**What the chips pin.** Each knob moved alone by {STEP:.0%} of its search range, down and up, from "
-             f"the calibrated preset (the search's scenes): the chips pin it when the objective rises by "
+             f"the calibrated preset (the search's scenes): the chips pin it alone when the objective rises by "
              f"{RISE:.0%} or more. " + (f"These they cannot pin, any value scoring alike: {', '.join(loose)}. "
                                         if loose else "They pin every knob alone. ")
-             + "Knobs that trade against each other (altitude against range, gain against albedo) each look "
-               "pinned alone; their calibrated values are one of many.", "",
-             "| knob | calibrated | moved to | objective rise | pinned |", "|---|---|---|---|---|"]
+             + f"On {len(fresh)} other draws of the search's scenes the calibrated preset scores "
+               f"{np.mean(fresh):.3g} ± {np.std(fresh):.2g} (the search fits its own draws); {count} trials score "
+               f"within {RISE:.0%} of that, as well as it, and a knob is pinned when every one of them holds it within "
+               f"{SPAN:.0%} of its calibrated value. "
+             + (f"These move it alone, but values more than {SPAN:.0%} away score as well (they trade against other "
+                f"knobs, or the spread over scene draws hides them): {', '.join(traded)}. " if traded else "")
+             + (f"Fewer than {AS_GOOD} such trials cannot show which knobs trade: a longer search can. "
+                if count < AS_GOOD else ""), "",
+             "| knob | calibrated | moved to | objective rise | as good | pinned |", "|---|---|---|---|---|---|"]
     lines += [f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
-              f"{p['share']:+.0%} | {'yes' if p['pinned'] else '**no**'} |" for n, p in pins.items()]
+              f"{p['share']:+.0%} | {_number(p['as_good'][0])} - {_number(p['as_good'][1])} | {verdict[p['pinned']]} |"
+              for n, p in pins.items()]
     return lines
 
 

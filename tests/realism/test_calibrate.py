@@ -134,7 +134,10 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     report = (out / "report.md").read_text()
     assert "post.gain: 0.75 ->" in (out / "preset.toml").read_text()
     assert "25 trials" in report and (out / "sheet.png").is_file() and (out / "objective.png").is_file()
-    assert "| post.gain | 0.3" in report and json.loads((out / "sensitivity.json").read_text())["post.gain"]["pinned"]
+    pins = json.loads((out / "sensitivity.json").read_text())["post.gain"]
+    # the gain moves the objective alone; 25 trials leave too few near the best to see whether others trade
+    assert "| post.gain | 0.3" in report and pins["alone"] and pins["pinned"] is None
+    assert "too few trials to tell" in report and len(pins["fresh"]) == 4
 
     import optuna
 
@@ -259,7 +262,7 @@ def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
 
 
 def test_the_report_tells_a_pinned_knob_from_one_the_chips_cannot_pin():
-    from sasmi.realism.calibration_report import sensitivity, sensitivity_lines
+    from sasmi.realism.calibration_report import sensitivity, sensitivity_lines, trade_offs
 
     calls = []
 
@@ -271,8 +274,57 @@ def test_the_report_tells_a_pinned_knob_from_one_the_chips_cannot_pin():
     pins = sensitivity(best, objectives)
     assert len(calls) == 1 and len(calls[0]) == 5  # one batch for the trials' workers ...
     assert calls[0][0] == best  # ... the calibrated setting, then each knob alone down and up
-    assert pins["post.gain"]["pinned"] and pins["post.gain"]["rise"] > 0.5
+    assert pins["post.gain"]["alone"] and pins["post.gain"]["rise"] > 0.5
     assert pins["post.gain"]["moved"][0] < 0.3 < pins["post.gain"]["moved"][1]
-    assert not pins["post.noise_std"]["pinned"] and pins["post.noise_std"]["rise"] == 0.0
+    assert not pins["post.noise_std"]["alone"] and pins["post.noise_std"]["rise"] == 0.0
     assert pins["post.noise_std"]["moved"] == [pytest.approx(0.03), pytest.approx(0.07)]  # 20 % of its 0-0.1 range
+    trials = [(1.0 + math.log(g / 0.3) ** 2, {"post.gain": g, "post.noise_std": n})
+              for g, n in zip(np.linspace(0.28, 0.32, 12), np.linspace(0.0, 0.1, 12))]
+    pins = trade_offs(pins, trials, best, 1.0, [1.0, 1.0])
+    assert pins["post.gain"]["pinned"] is True and pins["post.noise_std"]["pinned"] is False
     assert "cannot pin, any value scoring alike: post.noise_std." in "\n".join(sensitivity_lines(pins, best))
+
+
+def test_knobs_that_trade_along_a_ridge_are_not_called_pinned():
+    """Gain and albedo each move the objective alone, but only their product is seen: the trials the search
+    found as good as the best hold neither; the looks, seen alone, stay pinned."""
+    from sasmi.realism.calibration_report import sensitivity, sensitivity_lines, trade_offs
+
+    def objective(v):
+        seen = v["post.gain"] * v["seafloor.albedo"]
+        return 1.0 + 4 * math.log(seen / 0.1) ** 2 + math.log(v["post.speckle_looks"] / 5) ** 2
+
+    best = {"post.gain": 0.25, "seafloor.albedo": 0.4, "post.speckle_looks": 5.0}
+    pins = sensitivity(best, lambda settings: [objective(v) for v in settings])
+    assert all(p["alone"] for p in pins.values())
+    rng = np.random.default_rng(0)
+    gains = np.exp(rng.uniform(math.log(0.15), math.log(0.45), 60))  # the search's samples along the ridge
+    trials = [(objective(v), v) for v in ({"post.gain": g, "seafloor.albedo": 0.1 / g * math.exp(rng.normal(0, 0.03)),
+                                           "post.speckle_looks": 5.0 * math.exp(rng.normal(0, 0.03))} for g in gains)]
+    trials += [(objective(v), v) for v in ({**best, "post.speckle_looks": looks} for looks in (2.0, 3.0, 8.0, 12.0))]
+    # ... and off it in looks, scoring worse: not as good, so they do not unpin the looks
+    traded = trade_offs(pins, [(objective(best), best), *trials], best, 1.0, [0.98, 1.02])
+    assert traded["post.gain"]["as_good_trials"] >= 10
+    assert traded["post.gain"]["pinned"] is False and traded["seafloor.albedo"]["pinned"] is False
+    assert traded["post.speckle_looks"]["pinned"] is True
+    assert "the spread over scene draws hides them): post.gain, seafloor.albedo." in \
+        "\n".join(sensitivity_lines(traded, best))
+    few = trade_offs(pins, [(objective(best), best)], best, 1.0, [1.0])  # a search too short to see the ridge
+    assert {p["pinned"] for p in few.values()} == {None}
+    assert "too few trials to tell" in "\n".join(sensitivity_lines(few, best))
+
+
+def test_trials_as_good_as_the_calibrated_preset_are_judged_on_scenes_it_was_not_fitted_to():
+    """The search's best scores 0.6 on its own scenes but 1.0 on others: trials up to 1.1 are as good, so
+    the looks, held within 15 % by the trials near 0.6 only, are not pinned."""
+    from sasmi.realism.calibration_report import trade_offs
+
+    pins = {"post.speckle_looks": {"alone": True}}
+    best = {"post.speckle_looks": 5.0}
+    trials = [(0.6, best)] + [(0.6 + 0.004 * i, {"post.speckle_looks": 5.0 + 0.01 * i}) for i in range(12)]
+    trials += [(1.05, {"post.speckle_looks": 3.0}), (1.3, {"post.speckle_looks": 9.0})]
+    judged = trade_offs(pins, trials, best, 0.6, [0.95, 1.05])["post.speckle_looks"]
+    assert judged["as_good"] == [3.0, pytest.approx(5.11)] and judged["as_good_trials"] == 14
+    assert judged["pinned"] is False and judged["fresh"] == [0.95, 1.05]
+    # a search whose own draws are harder than most: every trial as good as the calibrated one still counts
+    assert trade_offs(pins, trials, best, 0.6, [0.3, 0.4])["post.speckle_looks"]["as_good_trials"] == 13
