@@ -11,7 +11,10 @@ Consecutive scenes with the same structure (pixel count, emitter count, target v
 counts) update the loaded Mitsuba scene through `mi.traverse`, so the JIT compiles the
 render kernel once per process and later images cost only the render itself. Target
 meshes are padded to a common size (`padded`) so that a chip of another kind, like a
-spot of another cone angle, is an update too, not a new scene.
+spot of another cone angle, is an update too, not a new scene. An update still rebuilds the
+whole scene's BVH (Mitsuba commits every shape again at Embree's high build quality): a floor
+behind an instance rebuilds alone and faster but traces slower, and padding the target count
+to one structure makes every update dearer, so neither is done (benchmarks/render.py times it).
 """
 from __future__ import annotations
 
