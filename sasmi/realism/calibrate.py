@@ -295,8 +295,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             final = replace(cfg, seed=cfg.seed + 1)
             best_raw = best_valid(study, preset, cfg, final)
             best = study.trials[study.user_attrs["calibrated_trial"]]
-            fresh = [trial_score(best_raw, preset.path, real, replace(cfg, seed=cfg.seed + 2 + k), encoder)["objective"]
-                     for k in range(FRESH_DRAWS)]  # what the calibrated preset scores on scenes it was not fitted to
+            fresh = [trial_score(best_raw, preset.path, real, replace(cfg, seed=cfg.seed + 2 + k),
+                                 encoder)["objective"] for k in range(FRESH_DRAWS)]  # scenes it was not fitted to
             pins = trade_offs(sensitivity(best.params, lambda settings: [
                 s["objective"] for s in run([apply(preset.raw, values) for values in settings])]),
                 [(t.value, t.params) for t in study.trials if t.value is not None], best.params, best.value, fresh)

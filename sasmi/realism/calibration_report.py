@@ -19,8 +19,8 @@ from sasmi.realism.preset_space import start_values
 SHOWN = 6  # chips per column of the sheet
 STEP = 0.2  # each knob is moved alone by this share of its search range (on its search scale), down and up ...
 RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average,
-SPAN = 0.15  # ... and every trial within RISE of the calibrated objective holds it within this share of its value
-AS_GOOD = 10  # trials within RISE needed before their spread can show knobs that trade against each other
+SPAN = 0.15  # ... and every trial scoring as well as the calibrated preset holds it within this share of its value
+AS_GOOD = 10  # trials that good needed before their spread can show knobs that trade against each other
 
 
 def searched_seconds(study) -> float:
@@ -58,8 +58,9 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     """`sensitivity`'s pins with what the search itself saw: each knob's range over the trials (objective,
     knobs) that score as well as the calibrated preset (`best_value`) does on `fresh` draws of the search's
     scene count, or on its own if that is worse. A search fits its own scenes' draws: the calibrated trial
-    mostly scores lower on them than on other draws, and within that spread no trial is better than another. Knobs that trade (gain against albedo, chip size
-    against target size) each move the objective alone, yet along their ridge other values score as well.
+    mostly scores lower on them than on other draws, and within that spread no trial beats another. Knobs
+    that trade (gain against albedo, chip size against target size) each move the objective alone, yet
+    along their ridge other values score as well.
     pinned: True where a knob moves the objective alone and every such trial holds it within SPAN of its
     calibrated value, False where it does not, None where fewer than AS_GOOD trials are that good to tell."""
     level = max(float(np.mean(fresh)), best_value)
