@@ -28,6 +28,8 @@ $sasmi generate seafloor_only --generator "$w/sasgan.pt" --seabeds "$w/seabeds.p
 # the same generator on real floors: the train side's seafloor chips, as a user with floor chips of the sonar
 $sasmi generate cylinder_chip --generator "$w/sasgan.pt" --floors "$runs/split/train/seafloor" \
     --real "$runs/split/train/targets" --count 400 --seed 1 --out "$out/targets-on-floors"
+$sasmi generate seafloor_only --generator "$w/sasgan.pt" --floors "$runs/split/train/seafloor" \
+    --real "$runs/split/train/targets" --count 400 --seed 2 --out "$out/negatives-on-floors"
 sets=(--set "shipped_recipe=$out/targets" --set "renders_on_seabeds=$out/train/on_floors")
 [ -d "$fit/translated" ] && sets+=(--set "fit=$fit/translated" --set "fit_on_floors=$fit/on_floors")
 $sasmi evaluate --real "$runs/split/validation/targets" --phi "$w/phi.pt" "${sets[@]}" --bootstrap 100 \
@@ -36,3 +38,6 @@ $sasmi evaluate --real "$runs/split/validation/targets" --phi "$w/phi.pt" --set 
     --set "on_real_floors=$out/targets-on-floors" --bootstrap 100 --out "$out/report-floors"
 $sasmi atr-bench --real-train "$runs/split/train" --real-test "$runs/split/validation" \
     --synthetic "$out/targets" --synthetic-negatives "$out/negatives" --out "$runs/atr-shipped-recipe"
+$sasmi atr-bench --real-train "$runs/split/train" --real-test "$runs/split/validation" \
+    --synthetic "$out/targets-on-floors" --synthetic-negatives "$out/negatives-on-floors" \
+    --out "$runs/atr-shipped-recipe-floors"
