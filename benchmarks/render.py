@@ -94,9 +94,8 @@ def ray_cast_ms(size: int, spp: int, repeats: int = 5) -> tuple[float, float, fl
 
     update = best(lambda: (renderer.prepare(g), dr.sync_thread()))
     launch = best(lambda: renderer.collect(renderer.launch(0)))
-    times = []
-    for _ in range(repeats + 1):
-        start = time.perf_counter()
+
+    def cast() -> None:
         down = mi.Vector3f(0, 0, -1)
         hit = origin + down * scene.ray_intersect_preliminary(mi.Ray3f(origin, down)).t
         towards = light - hit
@@ -104,8 +103,8 @@ def ray_cast_ms(size: int, spp: int, repeats: int = 5) -> tuple[float, float, fl
         blocked = scene.ray_test(mi.Ray3f(hit + 1e-4 * towards / distance, towards / distance, distance * 0.999))
         dr.eval(blocked)
         dr.sync_thread()
-        times.append((time.perf_counter() - start) * 1000)
-    return min(times[1:]), update, launch
+
+    return best(cast), update, launch
 
 
 def povray_ms(scene, size: int) -> tuple[float, float]:
