@@ -1,0 +1,68 @@
+"""The two-sample test of several chip sets against one real folder, over several classifier seeds, paired.
+
+    python benchmarks/two_sample_seeds.py --real runs/split/validation/targets --seeds 4 SET [SET ...]
+
+`sasmi evaluate` runs the test once per set: its ROC AUC moves by a few hundredths from one
+classifier seed to the next, as much as many changes to a recipe do. Here each seed trains the
+same classifier (`sasmi evaluate`'s, at its size) on every set, so two sets are compared on the
+same folds and seeds: each set's mean AUC and spread over the seeds, then each set less the first,
+with a 95 % interval (normal, over the seeds). A SET is a folder of images or a render set.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def chips_of(folder: Path, size: int) -> np.ndarray:
+    """(N, size, size) uint8: a folder's images (a render set's images/) at 128 px, shrunk as the test shrinks them."""
+    from sasmi.errors import SasmiError
+    from sasmi.eval.two_sample import resized
+    from sasmi.images import list_images
+    from sasmi.preprocess import load_image
+
+    paths = list_images(folder / "images" if (folder / "images").is_dir() else folder)
+    if not paths:
+        raise SasmiError(f"{folder}: no image (png, jpg, tif, tiff, npy) in it")
+    return resized(np.stack([(load_image(p, 128) * 255).round().astype(np.uint8) for p in paths]), size)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--real", type=Path, required=True, help="the real chips")
+    p.add_argument("--seeds", type=int, default=4, help="classifier seeds (default: 4)")
+    p.add_argument("sets", type=Path, nargs="+", help="chip sets; the first is the one the others are compared with")
+    args = p.parse_args()
+
+    from sasmi.errors import SasmiError
+    from sasmi.eval.config import TwoSampleConfig
+    from sasmi.eval.two_sample import two_sample_auc
+
+    cfg = TwoSampleConfig()
+    try:
+        real = chips_of(args.real, cfg.size)
+        sets = {str(s): chips_of(s, cfg.size) for s in args.sets}
+    except SasmiError as e:
+        print(f"two_sample_seeds: {e}", file=sys.stderr)
+        return 2
+    aucs = {name: [] for name in sets}
+    for seed in range(args.seeds):
+        for name, chips in sets.items():
+            aucs[name].append(two_sample_auc(real, chips, cfg, seed=seed)["auc"])
+        print(f"seed {seed}: " + ", ".join(f"{n} {a[-1]:.3f}" for n, a in aucs.items()), flush=True)
+    first = np.array(aucs[str(args.sets[0])])
+    for name, a in aucs.items():
+        a = np.array(a)
+        line = f"{name}: ROC AUC {a.mean():.3f} (sd {a.std(ddof=1) if len(a) > 1 else 0.0:.3f})"
+        if name != str(args.sets[0]) and len(a) > 1:
+            d = a - first
+            line += f"; less the first {d.mean():+.3f} ± {1.96 * d.std(ddof=1) / np.sqrt(len(d)):.3f} (95 %)"
+        print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
