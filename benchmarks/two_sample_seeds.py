@@ -19,15 +19,10 @@ import numpy as np
 
 def chips_of(folder: Path, size: int) -> np.ndarray:
     """(N, size, size) uint8: a folder's images (a render set's images/) at 128 px, shrunk as the test shrinks them."""
-    from sasmi.errors import SasmiError
+    from sasmi.eval.features import image_paths, load_images, to_pixels
     from sasmi.eval.two_sample import resized
-    from sasmi.images import list_images
-    from sasmi.preprocess import load_image
 
-    paths = list_images(folder / "images" if (folder / "images").is_dir() else folder)
-    if not paths:
-        raise SasmiError(f"{folder}: no image (png, jpg, tif, tiff, npy) in it")
-    return resized(np.stack([(load_image(p, 128) * 255).round().astype(np.uint8) for p in paths]), size)
+    return resized(to_pixels(load_images(image_paths(folder), 128)), size)
 
 
 def main() -> int:
