@@ -8,12 +8,16 @@ character that is no real chip (phase randomisation, Theiler et al. 1992). What 
 chip over its seabed is its speckle: its grain (power spectrum) and its gray levels (quantiles)
 are the sonar's, and a render's speckle has neither, which a small classifier sees at once
 (docs/gan.md, *Drawn floors*). A speckle of both is drawn by iterating between the two
-(IAAFT, Schreiber & Schmitz 1996). A seabeds file keeps, for each seafloor chip, the mean, the
-profile and the amplitudes, and for each chip that lends its speckle (those floor chips, or target
-chips' floors) the smoothed power spectrum and quantiles: statistics, no image. The shipped one
-(sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds of the seafloor chips of the shared
-target chips' sonar and the speckle of those target chips' floors, so that `sasmi generate` lays
-renders on real-like floors anywhere.
+(IAAFT, Schreiber & Schmitz 1996). Real speckle is not quite independent of its seabed: its
+contrast falls where the seabed is bright (the sonar's noise tells in the dark), which a seabed
+times a level-blind speckle lacks and a small classifier sees; each speckle chip's slope of contrast
+against level is kept, its speckle evened out by it before its grain and levels are taken, and a
+drawn speckle given it back over its new seabed (`contrast_slope`). A seabeds file keeps, for each
+seafloor chip, the mean, the profile and the amplitudes, and for each chip that lends its speckle
+(those floor chips, or target chips' floors) the smoothed power spectrum, quantiles and contrast
+slope: statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds the
+seabeds of the seafloor chips of the shared target chips' sonar and the speckle of those target
+chips' floors, so that `sasmi generate` lays renders on real-like floors anywhere.
 """
 from __future__ import annotations
 
@@ -35,8 +39,11 @@ IAAFT_ROUNDS = 10  # spectrum and levels agree to a few per cent after this many
 # rows either side of a target chip's centre row left out of its speckle: target chips are cut centred on the
 # target along track, and its highlight and shadow span at most this many rows at 128 px (`sasmi stats`)
 TARGET_ROWS = 24
+CONTRAST_BLOCK = 8  # px at 128: blocks in which a speckle's contrast is set against its seabed's level
+# the contrast slopes kept: real floor chips lie within about -0.8 and 0.2; beyond, a few blocks decided it
+SLOPE_LIMIT = 1.0
 KIND = "seabeds"
-TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels")
+TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels", "speckle_slope")
 
 
 @dataclass(frozen=True)
@@ -46,6 +53,7 @@ class Seabeds:
     amplitude: np.ndarray   # (N, COARSE, COARSE // 2 + 1) |rfft2| of the rest
     speckle_power: np.ndarray   # (M, SPECKLE // 2, SPECKLE // 4 + 1) a speckle's power spectrum, smoothed, no mean
     speckle_levels: np.ndarray  # (M, LEVELS) its quantiles; M: the floor chips, or the target chips' floors
+    speckle_slope: np.ndarray   # (M,) its contrast's slope against its seabed's level, log-log (`contrast_slope`)
     path: Path | None = None
 
     def shapes_agree(self) -> bool:
@@ -53,7 +61,7 @@ class Seabeds:
         return (self.mean.ndim == 1 and n > 0 and m > 0 and self.profile.shape == (n, COARSE)
                 and self.amplitude.shape == (n, COARSE, COARSE // 2 + 1)
                 and self.speckle_power.shape == (m, SPECKLE // 2, SPECKLE // 4 + 1)
-                and self.speckle_levels.shape == (m, LEVELS))
+                and self.speckle_levels.shape == (m, LEVELS) and self.speckle_slope.shape == (m,))
 
 
 def log_seabed(chip01: np.ndarray) -> np.ndarray:
@@ -104,10 +112,40 @@ def speckle_spectrum(speckle: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return _resized(smooth, (SPECKLE // 2, SPECKLE // 4 + 1), "area")
 
 
-def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    speckles = [speckle_of(chip) for chip in chips]
-    return (np.stack([speckle_spectrum(s, keep) for s in speckles]),
-            np.stack([np.quantile(s[keep], np.linspace(0.0, 1.0, LEVELS)) for s in speckles]))
+def contrast_slope(chip01: np.ndarray, keep: np.ndarray) -> float:
+    """How a floor chip's speckle contrast follows its seabed's level: the slope of log(std / mean) of the
+    speckle against log(mean seabed) over CONTRAST_BLOCK-px blocks wholly in `keep`, within ±SLOPE_LIMIT.
+
+    0 under the multiplicative model; real floors about −0.4: a dark patch is grainier, as a
+    sonar's additive noise makes it. chip01: (128, 128) in [0, 1]; keep: (128, 128) bool.
+    """
+    b = CONTRAST_BLOCK
+    blocks = lambda x: x[:x.shape[0] // b * b, :x.shape[1] // b * b].reshape(x.shape[0] // b, b, -1, b).swapaxes(1, 2)
+    speckle, seabed = blocks(speckle_of(chip01)), blocks(seabed_of(chip01))
+    whole = blocks(keep).all(axis=(2, 3))
+    contrast = speckle.std(axis=(2, 3)) / np.maximum(speckle.mean(axis=(2, 3)), 1e-9)
+    level, contrast = np.log(seabed.mean(axis=(2, 3))[whole]), np.log(np.maximum(contrast[whole], 1e-9))
+    if len(level) < 3 or np.ptp(level) < 1e-6:
+        return 0.0
+    return float(np.clip(np.polyfit(level, contrast, 1)[0], -SLOPE_LIMIT, SLOPE_LIMIT))
+
+
+def _level_factor(seabed: np.ndarray, slope: float, where: np.ndarray | None = None) -> np.ndarray:
+    """(H, W): how much a speckle's deviations from its mean grow over `seabed` with `slope` (1 at its median)."""
+    median = np.median(seabed if where is None else seabed[where])
+    return np.clip(seabed / median, 0.05, 20.0) ** slope
+
+
+def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    powers, levels, slopes = [], [], []
+    for chip in chips:
+        slope, speckle = contrast_slope(chip, keep), speckle_of(chip)
+        mean = speckle[keep].mean()
+        even = mean + (speckle - mean) / _level_factor(seabed_of(chip), slope, keep)  # its contrast made level-blind
+        powers.append(speckle_spectrum(even, keep))
+        levels.append(np.quantile(even[keep], np.linspace(0.0, 1.0, LEVELS)))
+        slopes.append(slope)
+    return np.stack(powers), np.stack(levels), np.array(slopes)
 
 
 def fit_seabeds(floors: str | os.PathLike, targets: str | os.PathLike | None = None) -> Seabeds:
@@ -145,8 +183,9 @@ def draw_seabed(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generat
     phase = np.angle(np.fft.rfft2(rng.standard_normal((COARSE, COARSE))))
     rest = np.fft.irfft2(seabeds.amplitude[k] * np.exp(1j * phase), s=(COARSE, COARSE))
     log = seabeds.mean[k] + seabeds.profile[k][None, :] + rest
-    fine = _resized(np.exp(log), shape, "bilinear")
-    return ndimage.gaussian_filter(fine, SEABED * shape[0] / 128)
+    # no blur here: the amplitudes are of a seabed already blurred over SEABED px; blurred again, its relief
+    # at 4-8 px would be half its source's
+    return _resized(np.exp(log), shape, "bilinear")
 
 
 def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.ndarray:
@@ -168,12 +207,15 @@ def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.nd
 
 def draw_floor(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """(H, W) >= 0: a drawn seabed under a drawn speckle, each of a chip drawn at random, at `shape` (speckle
-    drawn at SPECKLE px, area-averaged or interpolated to `shape` as real chips are when loaded)."""
+    drawn at SPECKLE px, area-averaged or interpolated to `shape` as real chips are when loaded), the
+    speckle's contrast following the seabed's level by its chip's slope."""
     seabed = draw_seabed(seabeds, shape, rng)
-    speckle = draw_speckle(seabeds, int(rng.integers(len(seabeds.speckle_levels))), rng)
+    chip = int(rng.integers(len(seabeds.speckle_levels)))
+    speckle = draw_speckle(seabeds, chip, rng)
     if speckle.shape != tuple(shape):
         speckle = _resized(speckle, shape, "area" if shape[0] < SPECKLE else "bilinear")
-    return seabed * speckle
+    mean = speckle.mean()
+    return seabed * np.maximum(mean + (speckle - mean) * _level_factor(seabed, seabeds.speckle_slope[chip]), 0.0)
 
 
 def save_seabeds(seabeds: Seabeds, out: str | os.PathLike, about: dict | None = None) -> Path:

@@ -13,8 +13,8 @@ from scipy import ndimage
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
 from sasmi.realism.floors import on_floor, onto_seabed_floors, seabed_floor
-from sasmi.realism.seabeds import (draw_seabed, draw_speckle, fit_seabeds, load_seabeds, log_seabed,
-                                   save_seabeds, speckle_of)
+from sasmi.realism.seabeds import (SEABED, contrast_slope, draw_floor, draw_seabed, draw_speckle, fit_seabeds,
+                                   load_seabeds, log_seabed, save_seabeds, speckle_of)
 
 SIZE = 128
 
@@ -76,6 +76,20 @@ def test_drawn_seabeds_copy_no_source_and_follow_their_stream(seabeds, tmp_path_
     assert max(nearest) < 0.9 and np.mean(nearest) < 0.7
 
 
+def test_drawn_floors_have_their_sources_relief(seabeds, tmp_path_factory):
+    """A drawn seabed is its source's seabed (a chip blurred over SEABED px) under new phases, not blurred again:
+    seen as a chip is (`log_seabed`, which blurs once more), a drawn floor swings as much as its source so seen."""
+    from sasmi.images import list_images
+    from sasmi.preprocess import load_image
+
+    relief = lambda chip: _rest(log_seabed(chip)).std()
+    folder = _banded_floors(tmp_path_factory.mktemp("relief"))
+    seabeds_seen = [relief(ndimage.gaussian_filter(load_image(p, SIZE).astype(np.float64), SEABED))
+                    for p in list_images(folder)]
+    drawn = [relief(draw_floor(seabeds, (SIZE, SIZE), np.random.default_rng(i))) for i in range(20)]
+    assert np.mean(drawn) == pytest.approx(np.mean(seabeds_seen), rel=0.08)  # blurred twice: 16 % less
+
+
 def test_drawn_speckle_has_its_sources_grain_and_levels(seabeds, tmp_path_factory):
     from sasmi.images import list_images
     from sasmi.preprocess import load_image
@@ -110,6 +124,34 @@ def test_target_chips_give_the_speckle_of_their_floor_not_of_their_target(tmp_pa
     assert _lag1(drawn, 1) == pytest.approx(_lag1(clean[0], 1), abs=0.1)  # the floor's grain, not the edges'
 
 
+def _grainier_in_the_dark(folder, slope, n=6, seed=2):
+    """Banded floor chips whose speckle's deviations grow as (level / median)^slope: contrast falling with level."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        level = 0.25 * np.exp(0.6 * np.sin(np.arange(SIZE) / 9.0 + rng.uniform(0, 6)))[:, None] * np.ones(SIZE)
+        speckle = _grainy_speckle(rng)
+        mean = speckle.mean()
+        grain = mean + (speckle - mean) * (level / np.median(level)) ** slope
+        write_gray(folder / f"floor_{i}.png", np.clip(level * grain, 0, 1))
+    return folder
+
+
+def test_drawn_floors_keep_how_their_sources_speckle_contrast_follows_the_level(tmp_path):
+    from sasmi.images import list_images
+    from sasmi.preprocess import load_image
+
+    everywhere = np.ones((SIZE, SIZE), bool)
+    for slope in (-0.5, 0.0):
+        folder = _grainier_in_the_dark(tmp_path / f"slope{slope}", slope)
+        measured = [contrast_slope(load_image(p, SIZE).astype(np.float64), everywhere) for p in list_images(folder)]
+        assert np.median(measured) == pytest.approx(slope, abs=0.1)
+        fitted = fit_seabeds(folder)
+        np.testing.assert_allclose(fitted.speckle_slope, measured)
+        drawn = [contrast_slope(np.clip(draw_floor(fitted, (SIZE, SIZE), np.random.default_rng(i)), 0, 1), everywhere)
+                 for i in range(12)]
+        assert np.median(drawn) == pytest.approx(slope, abs=0.1)
+
+
 def test_seabed_floor_replaces_the_renders_speckle_with_a_drawn_one(seabeds):
     rng = np.random.default_rng(0)
     mask = np.zeros((SIZE, SIZE), np.uint8)
@@ -139,7 +181,7 @@ def test_renders_on_seabed_floors_keep_their_labels(seabeds, render_set, tmp_pat
 def test_seabeds_file_round_trip_and_bad_files(seabeds, tmp_path):
     path = save_seabeds(seabeds, tmp_path / "seabeds.pt", {"note": "test"})
     loaded = load_seabeds(path)
-    for table in ("amplitude", "speckle_power", "speckle_levels"):
+    for table in ("amplitude", "speckle_power", "speckle_levels", "speckle_slope"):
         np.testing.assert_allclose(getattr(loaded, table), getattr(seabeds, table), rtol=1e-6)
     assert loaded.path == path
     torch.load(path, weights_only=True)  # tensors and plain types only
