@@ -1,6 +1,6 @@
-"""Floors drawn from real floors' statistics: the source's range profile, directions, speckle grain and gray levels
-kept, no source copied, one stream per chip, and a seabeds file that fails in one line; renders laid on them keep
-their labels."""
+"""Floors drawn from real floors' statistics: the source's range profile, directions, relief, speckle grain, gray
+levels and speckle contrast against level kept, no source copied, one stream per chip, and a seabeds file that fails
+in one line; renders laid on them keep their labels."""
 from __future__ import annotations
 
 import json
