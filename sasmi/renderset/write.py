@@ -140,11 +140,12 @@ Task = Callable[..., object]
 
 
 def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object], bool], busy_here: int = 0,
-              **kwargs) -> Iterator:
+              ahead: int = 0, **kwargs) -> Iterator:
     """(item, task(job, item, threads=..., **kwargs)) for each item of `items` that `claim` grants, in
     completion order: in this process (--workers 1), on a local Dask cluster (--workers N) or on the
     cluster at --scheduler. `busy_here`: thread pools of this process busy meanwhile (a generator),
-    which local workers leave their share of the cores to."""
+    which local workers leave their share of the cores to; `ahead`: tasks kept in flight beyond the
+    workers' own (sasmi.renderset.cluster.stream)."""
     if job.scheduler is None and (job.workers == 1 or len(items) <= 1):  # a cluster would only cost its start
         for item in items:
             if claim(item):
@@ -157,7 +158,7 @@ def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object],
     threads = None if job.scheduler else local_threads(workers + busy_here)
     remote = replace(job, out=job.out.resolve())  # workers may run elsewhere, in another folder
     with dask_client(job.scheduler, workers) as client:
-        yield from stream(client, task, remote, items, claim, threads, **kwargs)
+        yield from stream(client, task, remote, items, claim, threads, ahead, **kwargs)
 
 
 # -- the run record -------------------------------------------------------------------------
@@ -273,7 +274,9 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
         share_torch_threads(job.workers + 1)
     with tqdm(total=len(indices), initial=len(indices) - len(todo), unit="img", desc="render",
               disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
-        stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), write=transform is None)
+        # while the driver translates one batch, the workers render the next
+        stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), ahead=batch if beside else 0,
+                           write=transform is None)
         try:
             while chunk := list(itertools.islice(stream, batch if transform else 1)):
                 if transform is not None:

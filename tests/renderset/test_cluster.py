@@ -133,3 +133,20 @@ def test_scheduler_addresses_accepted():
 
     for text in ("tcp://127.0.0.1:8786", "tcp://[::1]:8786", "tls://node-3.cluster:8786", "node3:8786"):
         assert scheduler_address(text) == text
+
+
+def test_tasks_ahead_stay_in_flight_while_the_caller_is_busy(scheduler):
+    """`ahead`: a generator translating a batch leaves the workers that many more chips to render meanwhile."""
+    from distributed import Client
+
+    from sasmi.renderset.cluster import TASKS_PER_THREAD, stream
+
+    with Client(scheduler, timeout=START_TIMEOUT_S) as client:
+        for ahead in (0, 5):
+            granted = []
+            results = stream(client, lambda job, item, threads: (job, item * 2), "job", list(range(30)),
+                             lambda i: granted.append(i) is None, None, ahead)
+            first = next(results)
+            assert len(granted) == TASKS_PER_THREAD * 2 + ahead  # two single-threaded workers
+            done = sorted([first, *results])
+            assert done == [(i, ("job", 2 * i)) for i in range(30)] and sorted(granted) == list(range(30))
