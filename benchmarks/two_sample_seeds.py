@@ -7,6 +7,10 @@ classifier seed to the next, as much as many changes to a recipe do. Here each s
 same classifier (`sasmi evaluate`'s, at its size) on every set, so two sets are compared on the
 same folds and seeds: each set's mean AUC and spread over the seeds, then each set less the first,
 with a 95 % interval (normal, over the seeds). A SET is a folder of images or a render set.
+
+Where does the signature lie? `--hide target` sets the band where target chips show their target and
+shadow (the middle quarter of the rows, from 5/16 of the range on) to each chip's median in every set and
+in the real chips, so that only the floor is judged; `--hide floor` keeps that band alone.
 """
 from __future__ import annotations
 
@@ -25,10 +29,25 @@ def chips_of(folder: Path, size: int) -> np.ndarray:
     return resized(to_pixels(load_images(image_paths(folder), 128)), size)
 
 
+def hidden(chips: np.ndarray, hide: str) -> np.ndarray:
+    """(N, S, S) chips with the target band (`--hide target`) or all but it (`--hide floor`) set to each
+    chip's median; as they are for `--hide none`."""
+    if hide == "none":
+        return chips
+    s = chips.shape[-1]
+    band = np.zeros((s, s), bool)
+    band[3 * s // 8:5 * s // 8, 5 * s // 16:] = True  # target chips are cut centred on the target; range grows right
+    out = chips.copy()
+    out[:, band if hide == "target" else ~band] = np.median(chips, axis=(1, 2))[:, None]
+    return out
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--real", type=Path, required=True, help="the real chips")
     p.add_argument("--seeds", type=int, default=4, help="classifier seeds (default: 4)")
+    p.add_argument("--hide", choices=("none", "target", "floor"), default="none",
+                   help="judge the floor alone (target) or the target band alone (floor); default: whole chips")
     p.add_argument("sets", type=Path, nargs="+", help="chip sets; the first is the one the others are compared with")
     args = p.parse_args()
 
@@ -38,8 +57,8 @@ def main() -> int:
 
     cfg = TwoSampleConfig()
     try:
-        real = chips_of(args.real, cfg.size)
-        sets = {str(s): chips_of(s, cfg.size) for s in args.sets}
+        real = hidden(chips_of(args.real, cfg.size), args.hide)
+        sets = {str(s): hidden(chips_of(s, cfg.size), args.hide) for s in args.sets}
     except SasmiError as e:
         print(f"two_sample_seeds: {e}", file=sys.stderr)
         return 2

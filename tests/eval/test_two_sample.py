@@ -47,3 +47,24 @@ def test_chips_are_shrunk_by_area():
     assert small.shape == (2, 32, 32) and small[:, :16].min() == 1.0 and small[:, 16:].max() == 0.0
     many = np.random.default_rng(0).integers(0, 256, (7, 64, 64), np.uint8)
     np.testing.assert_array_equal(resized(many, 32, block=3), resized(many, 32, block=7))  # block by block: the same
+
+
+def test_hiding_the_target_band_judges_the_floor_alone():
+    """benchmarks/two_sample_seeds.py --hide: a signature in the target band is seen with the floor hidden
+    (`floor`) and not with the band hidden (`target`); one outside the band the other way round."""
+    import importlib.util
+
+    from conftest import REPO
+
+    spec = importlib.util.spec_from_file_location("two_sample_seeds", REPO / "benchmarks" / "two_sample_seeds.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    real = _speckle(60, 6.0, 0)
+    in_band, off_band = _speckle(60, 6.0, 1), _speckle(60, 6.0, 1)
+    in_band[:, 14:16, 16:24] = 1.0   # a bright stripe where target chips have their target (rows 12-20, cols 10-)
+    off_band[:, 2:4, 16:24] = 1.0    # the same stripe on the floor, above the band
+    cfg = TwoSampleConfig(folds=3, repeats=1, epochs=80, max_steps=100, size=32)
+    auc = {(name, hide): two_sample_auc(bench.hidden(real, hide), bench.hidden(fake, hide), cfg)["auc"]
+           for name, fake in (("in band", in_band), ("off band", off_band)) for hide in ("target", "floor")}
+    assert auc["in band", "floor"] > 0.9 and auc["off band", "target"] > 0.9, auc
+    assert auc["in band", "target"] < 0.7 and auc["off band", "floor"] < 0.7, auc
