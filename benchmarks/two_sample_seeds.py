@@ -47,7 +47,7 @@ def main() -> int:
     p.add_argument("--real", type=Path, required=True, help="the real chips")
     p.add_argument("--seeds", type=int, default=4, help="classifier seeds (default: 4)")
     p.add_argument("--hide", choices=("none", "target", "floor"), default="none",
-                   help="judge the floor alone (target) or the target band alone (floor); default: whole chips")
+                   help="target: judge the floor alone; floor: the target band alone (default: whole chips)")
     p.add_argument("sets", type=Path, nargs="+", help="chip sets; the first is the one the others are compared with")
     args = p.parse_args()
 

@@ -101,6 +101,10 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
     check_room(out_dir, sum(p.stat().st_size for p in todo), f"{len(todo)} translated chips")
     lock = FolderLock(out_dir, "translating")  # two generators into one folder would mix their chips
     try:
+        # a killed translation leaves the file it was writing as a hidden temporary (sasmi.images.atomic_path);
+        # under the lock no one else writes here, so each is a leftover
+        for leftover in out_dir.rglob(".*.tmp*"):
+            leftover.unlink(missing_ok=True)
         written = _translate_all(generator, paths, in_dir, out_dir, batch)
         write_text(out_dir / "translate.json", json.dumps(
             {"input": str(in_dir.resolve()), "images": written, **(provenance or {})}, indent=2) + "\n")

@@ -275,7 +275,7 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     with tqdm(total=len(indices), initial=len(indices) - len(todo), unit="img", desc="render",
               disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
         # while the driver translates one batch, the workers render the next
-        stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), ahead=batch if beside else 0,
+        stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), ahead=batch if transform else 0,
                            write=transform is None)
         try:
             while chunk := list(itertools.islice(stream, batch if transform else 1)):

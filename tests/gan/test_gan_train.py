@@ -243,6 +243,17 @@ def test_translate_folder_carries_render_set_labels(tmp_path, generator, renders
         translate_folder(generator, renders, renders / "images" / "out")
 
 
+def test_a_rerun_removes_what_a_killed_translation_was_writing(tmp_path, generator, renders):
+    """SIGKILL inside a PNG write leaves its hidden temporary (sasmi.images.atomic_path); the rerun clears it."""
+    out = tmp_path / "out"
+    translate_folder(generator, renders, out, batch=4)
+    (out / "images" / "000003.png").unlink()
+    leftover = out / "images" / ".000003.png.k1ll3d.tmp.png"  # as atomic_path names it
+    leftover.write_bytes(b"\x89PNG half")
+    assert translate_folder(generator, renders, out, batch=4) == 6
+    assert sorted(p.name for p in (out / "images").iterdir()) == [f"{i:06d}.png" for i in range(6)]
+
+
 class _Identity(torch.nn.Module):
     """A stand-in generator that returns its input and records the shapes it was shown."""
 
