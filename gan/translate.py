@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from sasmi.errors import SasmiError
-from sasmi.images import FolderLock, check_room, list_images, read_gray, write_gray, write_text
+from sasmi.images import TEMPORARIES, FolderLock, check_room, list_images, read_gray, write_gray, write_text
 from sasmi.labels import ChipLabel, read_labels
 from sasmi.preprocess import resize, signed_to_unit, unit_to_signed
 
@@ -101,9 +101,9 @@ def translate_folder(generator: torch.nn.Module, in_dir: str | os.PathLike, out_
     check_room(out_dir, sum(p.stat().st_size for p in todo), f"{len(todo)} translated chips")
     lock = FolderLock(out_dir, "translating")  # two generators into one folder would mix their chips
     try:
-        # a killed translation leaves the file it was writing as a hidden temporary (sasmi.images.atomic_path);
+        # a killed translation leaves the file it was writing as a hidden temporary;
         # under the lock no one else writes here, so each is a leftover
-        for leftover in out_dir.rglob(".*.tmp*"):
+        for leftover in out_dir.rglob(TEMPORARIES):
             leftover.unlink(missing_ok=True)
         written = _translate_all(generator, paths, in_dir, out_dir, batch)
         write_text(out_dir / "translate.json", json.dumps(

@@ -31,6 +31,7 @@ _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 FORMATS = {"png": ".png", "tiff16": ".tiff", "npy": ".npy"}
 T = TypeVar("T")
+TEMPORARIES = ".*.tmp*"  # the glob of atomic_path's temporaries: what a killed writer leaves
 
 
 @contextlib.contextmanager

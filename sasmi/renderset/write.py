@@ -31,7 +31,7 @@ from tqdm import tqdm
 from sasmi import __version__
 from sasmi.renderset.claims import Claims
 from sasmi.errors import SasmiError
-from sasmi.images import FORMATS, check_room, write_gray, write_text
+from sasmi.images import FORMATS, TEMPORARIES, check_room, write_gray, write_text
 from sasmi.labels import ChipLabel, categories_of, read_labels
 from sasmi.limits import FLAGS
 from sasmi.masks import write_class_mask, write_instance_mask
@@ -225,7 +225,7 @@ def _temp_files(out: Path) -> dict[int, list[Path]]:
     """Temp files of killed writers, by chip index; removed by whoever claims the chip next."""
     found: dict[int, list[Path]] = {}
     for sub in ("images", "masks", "instances", "shadows", "labels"):
-        for path in (out / sub).glob(".*.tmp*"):
+        for path in (out / sub).glob(TEMPORARIES):
             stem = path.name[1:].split(".", 1)[0]
             if stem.isdigit():
                 found.setdefault(int(stem), []).append(path)
