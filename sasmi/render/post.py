@@ -38,7 +38,9 @@ def _gamma_quantiles(looks: float) -> tuple[np.ndarray, np.ndarray]:
     """(z, q): the Gamma(looks, 1 / looks) quantile at the standard-normal quantile z, tabulated."""
     from scipy.special import gammaincinv, ndtr
 
-    z = np.linspace(-8.0, 8.0, 8193)
+    # z every 1/64: at 1 look its interpolation is within 3e-5 (of a mean of 1) of a table 8 times finer, far
+    # under a gray level, and it costs 1 ms, not 6: a preset draws each chip's looks anew
+    z = np.linspace(-8.0, 8.0, 1025)
     return z, gammaincinv(looks, np.clip(ndtr(z), 1e-300, 1 - 1e-16)) / looks
 
 

@@ -274,3 +274,16 @@ def test_speckle_table_lookup_is_np_interp():
     x = np.random.default_rng(3).normal(0.0, 3.0, (64, 64))
     x[0, :4] = [-20.0, 20.0, z[0], z[-1]]  # beyond the table and on its ends
     assert np.allclose(_interp_uniform(x, z, q), np.interp(x, z, q), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("looks", [1.0, 6.5])
+def test_speckle_table_is_within_a_fraction_of_a_gray_level_of_the_gamma_quantile(looks):
+    """The tabulated quantile, interpolated, against scipy's Gamma(looks, 1 / looks) quantile itself."""
+    from scipy import stats
+
+    from sasmi.render.post import _gamma_quantiles, _interp_uniform
+
+    z, q = _gamma_quantiles(looks)
+    x = np.random.default_rng(4).normal(0.0, 1.5, 20000)
+    exact = stats.gamma.ppf(stats.norm.cdf(x), looks, scale=1.0 / looks)
+    assert np.abs(_interp_uniform(x, z, q) - exact).max() < 1e-4  # a gray level is 4e-3 of full scale
