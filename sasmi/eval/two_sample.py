@@ -23,6 +23,7 @@ from sasmi.eval.config import TwoSampleConfig
 from sasmi.eval.features import FeatureSet
 from sasmi.eval.neighbours import nearest
 from sasmi.eval.report import mosaic_figure
+from sasmi.eval.signature import signature, signature_markdown
 
 FIGURE = "most_synthetic.png"
 
@@ -68,7 +69,8 @@ def training_steps(n: int, folds: int, cfg: TwoSampleConfig) -> int:
 
 def two_sample_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: TwoSampleConfig, seed: int,
                        out_dir: Path) -> dict:
-    """Per set: ROC AUC ± of the two-sample test and its most synthetic chips; one figure row per set."""
+    """Per set: ROC AUC ± of the two-sample test, its most synthetic chips (one figure row per set) and the plain
+    statistics that tell it apart (sasmi.eval.signature)."""
     real_small = resized(real.images, cfg.size)
     result, rows = {}, []
     for i, s in enumerate(sets):
@@ -78,7 +80,8 @@ def two_sample_metrics(real: FeatureSet, sets: Sequence[FeatureSet], cfg: TwoSam
         result[s.name] = {k: v for k, v in t.items() if k != "p_fake"} | {
             "most_synthetic": [{"chip": s.name_of(j), "p_generated": float(t["p_fake"][j]),
                                 "nearest_real": real.name_of(g), "phi_distance": float(d)}
-                               for j, g, d in zip(worst, idx[:, 0], dist[:, 0])]}
+                               for j, g, d in zip(worst, idx[:, 0], dist[:, 0])],
+            "signature": signature(real.images, s.images, seed)}
         rows.append([cell for j, g in zip(worst, idx[:, 0])
                      for cell in ((s.image(j), f"{s.name[:12]}\np {t['p_fake'][j]:.2f}"),
                                   (real.image(g), "nearest real"))])
@@ -96,5 +99,5 @@ def two_sample_markdown(result: dict, cfg: TwoSampleConfig) -> str:
     lines += [f"| {name} | {m['auc']:.3f} ± {m['auc_std']:.3f} | {m['folds']} × {m['repeats']} |"
               for name, m in result.items()]
     lines += ["", f"Each set's chips the classifier finds most synthetic (p: held-out probability of being "
-                  f"generated), each beside its nearest real chip in φ: ![most synthetic]({FIGURE})"]
-    return "\n".join(lines)
+                  f"generated), each beside its nearest real chip in φ: ![most synthetic]({FIGURE})", ""]
+    return "\n".join(lines + [signature_markdown({name: m["signature"] for name, m in result.items()})])

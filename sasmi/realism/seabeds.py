@@ -12,12 +12,15 @@ are the sonar's, and a render's speckle has neither, which a small classifier se
 contrast falls where the seabed is bright (the sonar's noise tells in the dark), which a seabed
 times a level-blind speckle lacks and a small classifier sees; each speckle chip's slope of contrast
 against level is kept, its speckle evened out by it before its grain and levels are taken, and a
-drawn speckle given it back over its new seabed (`contrast_slope`). A seabeds file keeps, for each
-seafloor chip, the mean, the profile and the amplitudes, and for each chip that lends its speckle
-(those floor chips, or target chips' floors) the smoothed power spectrum, quantiles and contrast
-slope: statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds the
-seabeds of the seafloor chips of the shared target chips' sonar and the speckle of those target
-chips' floors, so that `sasmi generate` lays renders on real-like floors anywhere.
+drawn speckle given it back over its new seabed (`contrast_slope`). Beyond its level, a real
+speckle's contrast also wanders from patch to patch, where an IAAFT speckle's is the same
+everywhere; each chip's excess wander is kept and a drawn speckle's contrast made to wander as much
+(`contrast_wander`). A seabeds file keeps, for each seafloor chip, the mean, the profile and the
+amplitudes, and for each chip that lends its speckle (those floor chips, or target chips' floors)
+the smoothed power spectrum, quantiles, contrast slope and wander: statistics, no image. The shipped
+one (sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds of the seafloor chips of the shared
+target chips' sonar and the speckle of those target chips' floors, so that `sasmi generate` lays
+renders on real-like floors anywhere.
 """
 from __future__ import annotations
 
@@ -43,8 +46,13 @@ CONTRAST_BLOCK = 8  # px at 128: blocks in which a speckle's contrast is set aga
 # the contrast slopes kept: 90 % of the shared target chips' floors lie within -0.9 and 0.2; 5 % reach -1, a
 # few dark blocks deciding the fit
 SLOPE_LIMIT = 1.0
+# px at 128: the patches over which a speckle's contrast wanders. On the shared target chips' floors the log
+# contrast of 8 px blocks, less its level's part, correlates 0.24 with the next block's (16 px blocks: 0.19);
+# drawn with a field smooth over 8 px, 0.28 (0.18)
+WANDER_LENGTH = 8.0
+WANDER_LIMIT = 0.5  # the most wander kept: exp(±2 × 0.5) swings contrast by e, far past the shared chips' (≤ 0.3)
 KIND = "seabeds"
-TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels", "speckle_slope")
+TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels", "speckle_slope", "speckle_wander")
 
 
 @dataclass(frozen=True)
@@ -55,6 +63,7 @@ class Seabeds:
     speckle_power: np.ndarray   # (M, SPECKLE // 2, SPECKLE // 4 + 1) a speckle's power spectrum, smoothed, no mean
     speckle_levels: np.ndarray  # (M, LEVELS) its quantiles; M: the floor chips, or the target chips' floors
     speckle_slope: np.ndarray   # (M,) its contrast's slope against its seabed's level, log-log (`contrast_slope`)
+    speckle_wander: np.ndarray  # (M,) the std of the log of its contrast's wander beyond level (`contrast_wander`)
     path: Path | None = None
 
     def shapes_agree(self) -> bool:
@@ -62,7 +71,8 @@ class Seabeds:
         return (self.mean.ndim == 1 and n > 0 and m > 0 and self.profile.shape == (n, COARSE)
                 and self.amplitude.shape == (n, COARSE, COARSE // 2 + 1)
                 and self.speckle_power.shape == (m, SPECKLE // 2, SPECKLE // 4 + 1)
-                and self.speckle_levels.shape == (m, LEVELS) and self.speckle_slope.shape == (m,))
+                and self.speckle_levels.shape == (m, LEVELS) and self.speckle_slope.shape == (m,)
+                and self.speckle_wander.shape == (m,))
 
 
 def log_seabed(chip01: np.ndarray) -> np.ndarray:
@@ -113,6 +123,16 @@ def speckle_spectrum(speckle: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return _resized(smooth, (SPECKLE // 2, SPECKLE // 4 + 1), "area")
 
 
+def _block_contrast(speckle: np.ndarray, seabed: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(log mean seabed, log speckle std / mean) of the CONTRAST_BLOCK-px blocks wholly in `keep`."""
+    b = CONTRAST_BLOCK
+    blocks = lambda x: x[:x.shape[0] // b * b, :x.shape[1] // b * b].reshape(x.shape[0] // b, b, -1, b).swapaxes(1, 2)
+    speckle, seabed = blocks(speckle), blocks(seabed)
+    whole = blocks(keep).all(axis=(2, 3))
+    contrast = speckle.std(axis=(2, 3)) / np.maximum(speckle.mean(axis=(2, 3)), 1e-9)
+    return np.log(seabed.mean(axis=(2, 3))[whole]), np.log(np.maximum(contrast[whole], 1e-9))
+
+
 def contrast_slope(chip01: np.ndarray, keep: np.ndarray) -> float:
     """How a floor chip's speckle contrast follows its seabed's level: the slope of log(std / mean) of the
     speckle against log(mean seabed) over CONTRAST_BLOCK-px blocks wholly in `keep`, within ±SLOPE_LIMIT.
@@ -120,15 +140,47 @@ def contrast_slope(chip01: np.ndarray, keep: np.ndarray) -> float:
     0 under the multiplicative model; real floors about −0.4: a dark patch is grainier, as a
     sonar's additive noise makes it. chip01: (128, 128) in [0, 1]; keep: (128, 128) bool.
     """
-    b = CONTRAST_BLOCK
-    blocks = lambda x: x[:x.shape[0] // b * b, :x.shape[1] // b * b].reshape(x.shape[0] // b, b, -1, b).swapaxes(1, 2)
-    speckle, seabed = blocks(speckle_of(chip01)), blocks(seabed_of(chip01))
-    whole = blocks(keep).all(axis=(2, 3))
-    contrast = speckle.std(axis=(2, 3)) / np.maximum(speckle.mean(axis=(2, 3)), 1e-9)
-    level, contrast = np.log(seabed.mean(axis=(2, 3))[whole]), np.log(np.maximum(contrast[whole], 1e-9))
+    level, contrast = _block_contrast(speckle_of(chip01), seabed_of(chip01), keep)
     if len(level) < 3 or np.ptp(level) < 1e-6:
         return 0.0
     return float(np.clip(np.polyfit(level, contrast, 1)[0], -SLOPE_LIMIT, SLOPE_LIMIT))
+
+
+def _unexplained(level: np.ndarray, contrast: np.ndarray) -> float:
+    """The spread of the blocks' log contrast that their level does not explain (a line's residuals)."""
+    if len(level) < 3 or np.ptp(level) < 1e-6:
+        return float(contrast.std()) if len(contrast) else 0.0
+    return float((contrast - np.polyval(np.polyfit(level, contrast, 1), level)).std())
+
+
+def contrast_wander(chip01: np.ndarray, keep: np.ndarray, stationary: np.ndarray, field: np.ndarray) -> float:
+    """How much a floor chip's speckle contrast wanders beyond its level: the wander under which `stationary`, an
+    IAAFT speckle of the chip's own grain and levels (whose blocks differ by chance alone), spreads its blocks' log
+    contrast beyond what the level explains as the chip's speckle does (`wandered` over `field`, a `wander_field`),
+    within [0, WANDER_LIMIT]. Real target chips' floors: about 0.1-0.3."""
+    from scipy.optimize import brentq
+
+    seabed = seabed_of(chip01)
+    real = _unexplained(*_block_contrast(speckle_of(chip01), seabed, keep))
+    excess = lambda w: _unexplained(*_block_contrast(wandered(stationary, w, field), seabed, keep)) - real
+    if excess(0.0) >= 0.0:
+        return 0.0
+    if excess(WANDER_LIMIT) <= 0.0:
+        return WANDER_LIMIT
+    return float(brentq(excess, 0.0, WANDER_LIMIT, xtol=1e-3))
+
+
+def wander_field(shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """(H, W): a field of unit spread, smooth over WANDER_LENGTH px (at 128 px)."""
+    field = ndimage.gaussian_filter(rng.standard_normal(shape), WANDER_LENGTH, mode="wrap")
+    return field / max(field.std(), 1e-12)
+
+
+def wandered(speckle: np.ndarray, wander: float, field: np.ndarray) -> np.ndarray:
+    """(H, W) >= 0: a speckle whose deviations from its mean are scaled by exp(wander × field − wander²): its
+    contrast wanders from patch to patch as the field does, its mean square kept."""
+    mean = speckle.mean()
+    return np.maximum(mean + (speckle - mean) * np.exp(wander * field - wander ** 2), 0.0)
 
 
 def _level_factor(seabed: np.ndarray, slope: float, where: np.ndarray | None = None) -> np.ndarray:
@@ -137,16 +189,19 @@ def _level_factor(seabed: np.ndarray, slope: float, where: np.ndarray | None = N
     return np.clip(seabed / median, 0.05, 20.0) ** slope
 
 
-def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    powers, levels, slopes = [], [], []
-    for chip in chips:
+def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, ...]:
+    powers, levels, slopes, wanders = [], [], [], []
+    for i, chip in enumerate(chips):
         slope, speckle = contrast_slope(chip, keep), speckle_of(chip)
         mean = speckle[keep].mean()
         even = mean + (speckle - mean) / _level_factor(seabed_of(chip), slope, keep)  # its contrast made level-blind
         powers.append(speckle_spectrum(even, keep))
         levels.append(np.quantile(even[keep], np.linspace(0.0, 1.0, LEVELS)))
         slopes.append(slope)
-    return np.stack(powers), np.stack(levels), np.array(slopes)
+        rng = np.random.default_rng(i)  # a stream per chip: the file's bytes fixed
+        stationary = _iaaft(powers[-1], levels[-1], rng)
+        wanders.append(contrast_wander(chip, keep, stationary, wander_field(stationary.shape, rng)))
+    return np.stack(powers), np.stack(levels), np.array(slopes), np.array(wanders)
 
 
 def fit_seabeds(floors: str | os.PathLike, targets: str | os.PathLike | None = None) -> Seabeds:
@@ -191,17 +246,20 @@ def draw_seabed(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generat
 
 def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.ndarray:
     """(SPECKLE, SPECKLE) > 0: a new speckle with chip `chip`'s grain and gray levels (IAAFT from shuffled levels)."""
-    power = _resized(seabeds.speckle_power[chip], (SPECKLE, SPECKLE // 2 + 1), "bilinear", align_corners=True)
+    return _iaaft(seabeds.speckle_power[chip], seabeds.speckle_levels[chip], rng)
+
+
+def _iaaft(speckle_power: np.ndarray, speckle_levels: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    power = _resized(speckle_power, (SPECKLE, SPECKLE // 2 + 1), "bilinear", align_corners=True)
     amplitude = np.sqrt(np.maximum(power, 0.0))
     amplitude[0, 0] = 0.0  # the mean is the levels' to set
-    levels = np.interp(np.linspace(0.0, 1.0, SPECKLE * SPECKLE), np.linspace(0.0, 1.0, LEVELS),
-                       seabeds.speckle_levels[chip])
+    levels = np.interp(np.linspace(0.0, 1.0, SPECKLE * SPECKLE), np.linspace(0.0, 1.0, LEVELS), speckle_levels)
     x = rng.permutation(levels).reshape(SPECKLE, SPECKLE)
+    ranked = np.empty_like(levels)
     for _ in range(IAAFT_ROUNDS):
         spectrum = np.fft.rfft2(x)
         # x's phases under the source's amplitudes: z |A| / |z| costs a third of exp(1j * angle(z))
         x = np.fft.irfft2(spectrum * (amplitude / np.maximum(np.abs(spectrum), 1e-300)), s=x.shape)
-        ranked = np.empty_like(levels)
         ranked[np.argsort(x, axis=None)] = levels  # the levels back, in x's order
         x = ranked.reshape(x.shape)
     return x
@@ -210,10 +268,11 @@ def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.nd
 def draw_floor(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """(H, W) >= 0: a drawn seabed under a drawn speckle, each of a chip drawn at random, at `shape` (speckle
     drawn at SPECKLE px, area-averaged or interpolated to `shape` as real chips are when loaded), the
-    speckle's contrast following the seabed's level by its chip's slope."""
+    speckle's contrast wandering as its chip's and following the seabed's level by its chip's slope."""
     seabed = draw_seabed(seabeds, shape, rng)
     chip = int(rng.integers(len(seabeds.speckle_levels)))
     speckle = draw_speckle(seabeds, chip, rng)
+    speckle = wandered(speckle, seabeds.speckle_wander[chip], wander_field(speckle.shape, rng))
     if speckle.shape != tuple(shape):
         speckle = _resized(speckle, shape, "area" if shape[0] < SPECKLE else "bilinear")
     mean = speckle.mean()
@@ -253,7 +312,10 @@ def load_seabeds(path: str | os.PathLike) -> Seabeds:
         raise SasmiError(f"{path}: seabeds format {data.get('format')!r}; this sasmi reads format {FORMAT} "
                          f"(written by {data.get('sasmi', 'another version')})")
     try:
-        seabeds = Seabeds(**{k: data["state"][k].double().numpy() for k in TABLES}, path=path)
+        state = {k: v.double().numpy() for k, v in data["state"].items()}
+        # a seabeds file without the wander table: its speckle is drawn without wander
+        state.setdefault("speckle_wander", np.zeros(len(state["speckle_levels"])))
+        seabeds = Seabeds(**{k: state[k] for k in TABLES}, path=path)
         ok = seabeds.shapes_agree()
     except (KeyError, TypeError, AttributeError):
         ok = False

@@ -1,6 +1,6 @@
 """Floors drawn from real floors' statistics: the source's range profile, directions, relief, speckle grain, gray
-levels and speckle contrast against level kept, no source copied, one stream per chip, and a seabeds file that fails
-in one line; renders laid on them keep their labels."""
+levels, speckle contrast against level and its wander kept, no source copied, one stream per chip, and a seabeds
+file that fails in one line; renders laid on them keep their labels."""
 from __future__ import annotations
 
 import json
@@ -13,8 +13,9 @@ from scipy import ndimage
 from sasmi.errors import SasmiError
 from sasmi.images import write_gray
 from sasmi.realism.floors import on_floor, onto_seabed_floors, seabed_floor
-from sasmi.realism.seabeds import (SEABED, contrast_slope, draw_floor, draw_seabed, draw_speckle, fit_seabeds,
-                                   load_seabeds, log_seabed, save_seabeds, speckle_of)
+from sasmi.realism.seabeds import (SEABED, _block_contrast, _unexplained, contrast_slope, draw_floor, draw_seabed,
+                                   draw_speckle, fit_seabeds, load_seabeds, log_seabed, save_seabeds, seabed_of,
+                                   speckle_of, wander_field, wandered)
 
 SIZE = 128
 
@@ -152,6 +153,37 @@ def test_drawn_floors_keep_how_their_sources_speckle_contrast_follows_the_level(
         assert np.median(drawn) == pytest.approx(slope, abs=0.1)
 
 
+def _wandering_floors(folder, wander, n=6, seed=3):
+    """Flat floor chips whose grainy speckle's contrast wanders over patches by `wander` (0: the same everywhere)."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        speckle = wandered(_grainy_speckle(rng), wander, wander_field((SIZE, SIZE), rng))
+        write_gray(folder / f"floor_{i}.png", np.clip(0.3 * speckle, 0, 1))
+    return folder
+
+
+def _contrast_spread(chip):
+    """How much the log contrast of a floor's 8 px blocks spreads beyond what their level explains."""
+    return _unexplained(*_block_contrast(speckle_of(chip), seabed_of(chip), np.ones(chip.shape, bool)))
+
+
+def test_drawn_floors_keep_how_much_their_sources_speckle_contrast_wanders(tmp_path):
+    from sasmi.images import list_images
+    from sasmi.preprocess import load_image
+
+    spreads = {}
+    for wander in (0.0, 0.3):
+        folder = _wandering_floors(tmp_path / f"wander{wander}", wander)
+        fitted = fit_seabeds(folder)
+        assert np.median(fitted.speckle_wander) == pytest.approx(wander, abs=0.06)
+        sources = [_contrast_spread(load_image(p, SIZE).astype(np.float64)) for p in list_images(folder)]
+        drawn = [_contrast_spread(np.clip(draw_floor(fitted, (SIZE, SIZE), np.random.default_rng(i)), 0, 1))
+                 for i in range(12)]
+        assert np.median(drawn) == pytest.approx(np.median(sources), rel=0.15)
+        spreads[wander] = np.median(sources)
+    assert spreads[0.3] > 1.3 * spreads[0.0]  # (the wander shows in the spread)
+
+
 def test_seabed_floor_replaces_the_renders_speckle_with_a_drawn_one(seabeds):
     rng = np.random.default_rng(0)
     mask = np.zeros((SIZE, SIZE), np.uint8)
@@ -181,8 +213,8 @@ def test_renders_on_seabed_floors_keep_their_labels(seabeds, render_set, tmp_pat
 def test_seabeds_file_round_trip_and_bad_files(seabeds, tmp_path):
     path = save_seabeds(seabeds, tmp_path / "seabeds.pt", {"note": "test"})
     loaded = load_seabeds(path)
-    for table in ("amplitude", "speckle_power", "speckle_levels", "speckle_slope"):
-        np.testing.assert_allclose(getattr(loaded, table), getattr(seabeds, table), rtol=1e-6)
+    for table in ("amplitude", "speckle_power", "speckle_levels", "speckle_slope", "speckle_wander"):
+        np.testing.assert_allclose(getattr(loaded, table), getattr(seabeds, table), rtol=1e-6, atol=1e-7)
     assert loaded.path == path
     torch.load(path, weights_only=True)  # tensors and plain types only
     bad = tmp_path / "bad.pt"
@@ -197,3 +229,6 @@ def test_seabeds_file_round_trip_and_bad_files(seabeds, tmp_path):
             load_seabeds(bad)
     with pytest.raises(SasmiError, match="no such seabeds file"):
         load_seabeds(tmp_path / "none.pt")
+    no_wander = tmp_path / "no_wander.pt"  # a file without the wander table: its speckle drawn without wander
+    torch.save({**data, "state": {k: v for k, v in data["state"].items() if k != "speckle_wander"}}, no_wander)
+    np.testing.assert_array_equal(load_seabeds(no_wander).speckle_wander, np.zeros(len(seabeds.speckle_wander)))
