@@ -140,7 +140,12 @@ def contrast_slope(chip01: np.ndarray, keep: np.ndarray) -> float:
     0 under the multiplicative model; real floors about −0.4: a dark patch is grainier, as a
     sonar's additive noise makes it. chip01: (128, 128) in [0, 1]; keep: (128, 128) bool.
     """
-    level, contrast = _block_contrast(speckle_of(chip01), seabed_of(chip01), keep)
+    seabed = seabed_of(chip01)
+    return _slope(chip01 / seabed, seabed, keep)
+
+
+def _slope(speckle: np.ndarray, seabed: np.ndarray, keep: np.ndarray) -> float:
+    level, contrast = _block_contrast(speckle, seabed, keep)
     if len(level) < 3 or np.ptp(level) < 1e-6:
         return 0.0
     return float(np.clip(np.polyfit(level, contrast, 1)[0], -SLOPE_LIMIT, SLOPE_LIMIT))
@@ -153,15 +158,15 @@ def _unexplained(level: np.ndarray, contrast: np.ndarray) -> float:
     return float((contrast - np.polyval(np.polyfit(level, contrast, 1), level)).std())
 
 
-def contrast_wander(chip01: np.ndarray, keep: np.ndarray, stationary: np.ndarray, field: np.ndarray) -> float:
-    """How much a floor chip's speckle contrast wanders beyond its level: the wander under which `stationary`, an
-    IAAFT speckle of the chip's own grain and levels (whose blocks differ by chance alone), spreads its blocks' log
+def contrast_wander(speckle: np.ndarray, seabed: np.ndarray, keep: np.ndarray, stationary: np.ndarray,
+                    field: np.ndarray) -> float:
+    """How much a floor chip's speckle (over its seabed) wanders beyond its level: the wander under which
+    `stationary`, an IAAFT speckle of the chip's own grain and levels (whose blocks differ by chance alone), spreads its blocks' log
     contrast beyond what the level explains as the chip's speckle does (`wandered` over `field`, a `wander_field`),
     within [0, WANDER_LIMIT]. Real target chips' floors: about 0.1-0.3."""
     from scipy.optimize import brentq
 
-    seabed = seabed_of(chip01)
-    real = _unexplained(*_block_contrast(speckle_of(chip01), seabed, keep))
+    real = _unexplained(*_block_contrast(speckle, seabed, keep))
     excess = lambda w: _unexplained(*_block_contrast(wandered(stationary, w, field), seabed, keep)) - real
     if excess(0.0) >= 0.0:
         return 0.0
@@ -192,15 +197,16 @@ def _level_factor(seabed: np.ndarray, slope: float, where: np.ndarray | None = N
 def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, ...]:
     powers, levels, slopes, wanders = [], [], [], []
     for i, chip in enumerate(chips):
-        slope, speckle = contrast_slope(chip, keep), speckle_of(chip)
-        mean = speckle[keep].mean()
-        even = mean + (speckle - mean) / _level_factor(seabed_of(chip), slope, keep)  # its contrast made level-blind
+        seabed = seabed_of(chip)
+        speckle = chip / seabed  # speckle_of, its seabed computed once
+        slope, mean = _slope(speckle, seabed, keep), speckle[keep].mean()
+        even = mean + (speckle - mean) / _level_factor(seabed, slope, keep)  # its contrast made level-blind
         powers.append(speckle_spectrum(even, keep))
         levels.append(np.quantile(even[keep], np.linspace(0.0, 1.0, LEVELS)))
         slopes.append(slope)
         rng = np.random.default_rng(i)  # a stream per chip: the file's bytes fixed
         stationary = _iaaft(powers[-1], levels[-1], rng)
-        wanders.append(contrast_wander(chip, keep, stationary, wander_field(stationary.shape, rng)))
+        wanders.append(contrast_wander(speckle, seabed, keep, stationary, wander_field(stationary.shape, rng)))
     return np.stack(powers), np.stack(levels), np.array(slopes), np.array(wanders)
 
 
