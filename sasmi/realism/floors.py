@@ -33,6 +33,7 @@ from sasmi.eval.config import PreservationConfig
 from sasmi.images import list_images, write_gray
 from sasmi.labels import ChipLabel
 from sasmi.chips.stats import chip_statistics, floor_level
+from sasmi.realism.display import bent
 from sasmi.realism.seabeds import draw_floor, seabed_of, speckle_of
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor. far_near: seafloor chips
@@ -42,6 +43,7 @@ FEATHER = 2          # px the target and shadow masks grow by before they are bl
 LOST = PreservationConfig()  # `sasmi evaluate`'s lost target: nothing above the blurred floor's bright percentile
 VISIBLE = 1.1        # the least `_visibility` of a composite's highlight (see on_floor)
 LIFTS = 4            # lifts of the highlight towards it: the blur mixes the unlifted floor into the peak
+GRAIN = 1.0          # px: a render's highlight blurred by this (within the target) is its brightness, less its speckle
 # floors kept per target chip: two give the composites more floors and more recall of real targets for a
 # small phi cost, three more recall at twice the cost (docs/gan.md, *Why each part*; figures in docs/results.md)
 FLOOR_CHOICES = 2
@@ -81,6 +83,13 @@ def _visibility(image01: np.ndarray, target: np.ndarray, floor: np.ndarray) -> f
     return float(blurred[target].max() / max(np.percentile(blurred[floor], LOST.bright_percentile), 1e-6))
 
 
+def _within(image: np.ndarray, where: np.ndarray, sigma: float) -> np.ndarray:
+    """`image` blurred over `sigma` px from its pixels in `where` alone (normalised convolution), there; as is elsewhere."""
+    blurred = ndimage.gaussian_filter(np.where(where, image, 0.0), sigma)
+    weight = ndimage.gaussian_filter(where.astype(np.float64), sigma)
+    return np.where(where, blurred / np.maximum(weight, 1e-9), image)
+
+
 def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.ndarray:
     """(H, W) in [0, 1]: the render's target and shadow on a real floor chip of the same shape.
 
@@ -91,29 +100,36 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
     render, floor = render01.astype(np.float64), floor01.astype(np.float64)
     if not (mask > 0).any() or not (mask == 0).any():
         return floor.astype(np.float32)
+    target = mask == 1
     ratio = render / floor_level(render, mask == 0)[None]  # the render against its own floor
     level = floor_level(floor)[None]
     laid = level * ratio                                   # the same ratios on the real floor
-    if (mask == 1).any():
+    if target.any():
         # a rocky real floor has a brighter tail than the render's: lift the highlight with it, as far
         # above the tail as it stood in the render (else `sasmi evaluate` counts it lost)
-        lift = _tail(floor / level, np.ones_like(mask, bool)) / max(_tail(ratio, mask == 0), 1e-6)
-        laid = np.where(mask == 1, laid * max(lift, 1.0), laid)
+        lift = max(_tail(floor / level, np.ones_like(mask, bool)) / max(_tail(ratio, mask == 0), 1e-6), 1.0)
+        # the highlight's brightness from the render, bent under the floor's brightest level, and its grain
+        # from the floor's speckle: a render's highlight often clips to flat white, a real one is speckled
+        brightness = bent(level * lift * _within(ratio, target, GRAIN), float(floor.max()))
+        laid = np.where(target, brightness * speckle_of(floor), laid)
     region = ndimage.binary_dilation(mask > 0, iterations=FEATHER)
     weight = np.maximum(ndimage.gaussian_filter(region.astype(np.float64), 1.0), region)
-    out = np.clip((1.0 - weight) * floor + weight * laid, 0.0, 1.0)
+    # bent under white (sasmi.realism.display), not clipped: a bright highlight keeps its grain
+    laid_on = lambda laid: np.clip((1.0 - weight) * floor + weight * bent(laid, 1.0), 0.0, 1.0)
+    out = laid_on(laid)
     # a faint render target (visibility under 1) that `sasmi evaluate` still finds is found
     # through the render's speckle beside it, which the real floor replaces: lifting each to
     # VISIBLE keeps it found. Each target on its own, or a dim companion beside a bright one is lost
-    objects, count = ndimage.label(mask == 1)
+    objects, count = ndimage.label(target)
     for k in range(1, count + 1):
-        target = objects == k
-        wanted = max(_visibility(render, target, mask == 0), VISIBLE)
+        one = objects == k
+        wanted = VISIBLE
         for _ in range(LIFTS):
-            got = _visibility(out, target, mask == 0)
+            got = _visibility(out, one, mask == 0)
             if got >= wanted or got <= 0.0:  # a black target cannot be scaled up
                 break
-            out = np.where(target, np.clip(out * wanted / got, 0.0, 1.0), out)
+            laid = np.where(one, laid * wanted / got, laid)
+            out = laid_on(laid)
     return out.astype(np.float32)
 
 

@@ -15,10 +15,12 @@ against level is kept, its speckle evened out by it before its grain and levels 
 drawn speckle given it back over its new seabed (`contrast_slope`). Beyond its level, a real
 speckle's contrast also wanders from patch to patch, where an IAAFT speckle's is the same
 everywhere; each chip's excess wander is kept and a drawn speckle's contrast made to wander as much
-(`contrast_wander`). A seabeds file keeps, for each seafloor chip, the mean, the profile and the
-amplitudes, and for each chip that lends its speckle (those floor chips, or target chips' floors)
-the smoothed power spectrum, quantiles, contrast slope and wander: statistics, no image. The shipped
-one (sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds of the seafloor chips of the shared
+(`contrast_wander`). A real chip's display bends its brightest levels under a ceiling, where a seabed
+times a speckle clips to white in clusters: a drawn floor is bent under its speckle chip's brightest
+level (sasmi.realism.display). A seabeds file keeps, for each seafloor chip, the mean, the profile
+and the amplitudes, and for each chip that lends its speckle (those floor chips, or target chips'
+floors) the smoothed power spectrum, quantiles, contrast slope, wander and brightest level:
+statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds of the seafloor chips of the shared
 target chips' sonar and the speckle of those target chips' floors, so that `sasmi generate` lays
 renders on real-like floors anywhere.
 """
@@ -33,6 +35,7 @@ from scipy import ndimage
 
 from sasmi.errors import SasmiError
 from sasmi.images import list_images
+from sasmi.realism.display import bent
 
 COARSE = 32      # px: a seabed (blurred over SEABED px at 128) keeps nothing finer than this grid shows
 SEABED = 4.0     # px at 128: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
@@ -52,7 +55,8 @@ SLOPE_LIMIT = 1.0
 WANDER_LENGTH = 8.0
 WANDER_LIMIT = 0.5  # the most wander kept: exp(±2 × 0.5) swings contrast by e, far past the shared chips' (≤ 0.3)
 KIND = "seabeds"
-TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels", "speckle_slope", "speckle_wander")
+TABLES = ("mean", "profile", "amplitude", "speckle_power", "speckle_levels", "speckle_slope", "speckle_wander",
+          "speckle_ceiling")
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,7 @@ class Seabeds:
     speckle_levels: np.ndarray  # (M, LEVELS) its quantiles; M: the floor chips, or the target chips' floors
     speckle_slope: np.ndarray   # (M,) its contrast's slope against its seabed's level, log-log (`contrast_slope`)
     speckle_wander: np.ndarray  # (M,) the std of the log of its contrast's wander beyond level (`contrast_wander`)
+    speckle_ceiling: np.ndarray  # (M,) its chip's brightest gray level, a drawn floor's ceiling (inf: none)
     path: Path | None = None
 
     def shapes_agree(self) -> bool:
@@ -72,7 +77,7 @@ class Seabeds:
                 and self.amplitude.shape == (n, COARSE, COARSE // 2 + 1)
                 and self.speckle_power.shape == (m, SPECKLE // 2, SPECKLE // 4 + 1)
                 and self.speckle_levels.shape == (m, LEVELS) and self.speckle_slope.shape == (m,)
-                and self.speckle_wander.shape == (m,))
+                and self.speckle_wander.shape == (m,) and self.speckle_ceiling.shape == (m,))
 
 
 def log_seabed(chip01: np.ndarray) -> np.ndarray:
@@ -207,7 +212,8 @@ def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarr
         rng = np.random.default_rng(i)  # a stream per chip: the file's bytes fixed
         stationary = _iaaft(powers[-1], levels[-1], rng)
         wanders.append(contrast_wander(speckle, seabed, keep, stationary, wander_field(stationary.shape, rng)))
-    return np.stack(powers), np.stack(levels), np.array(slopes), np.array(wanders)
+    brightest = np.array([chip.max() for chip in chips])
+    return np.stack(powers), np.stack(levels), np.array(slopes), np.array(wanders), brightest
 
 
 def fit_seabeds(floors: str | os.PathLike, targets: str | os.PathLike | None = None) -> Seabeds:
@@ -282,7 +288,8 @@ def draw_floor(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generato
     if speckle.shape != tuple(shape):
         speckle = _resized(speckle, shape, "area" if shape[0] < SPECKLE else "bilinear")
     mean = speckle.mean()
-    return seabed * np.maximum(mean + (speckle - mean) * _level_factor(seabed, seabeds.speckle_slope[chip]), 0.0)
+    floor = seabed * np.maximum(mean + (speckle - mean) * _level_factor(seabed, seabeds.speckle_slope[chip]), 0.0)
+    return bent(floor, seabeds.speckle_ceiling[chip])
 
 
 def save_seabeds(seabeds: Seabeds, out: str | os.PathLike, about: dict | None = None) -> Path:
@@ -319,8 +326,9 @@ def load_seabeds(path: str | os.PathLike) -> Seabeds:
                          f"(written by {data.get('sasmi', 'another version')})")
     try:
         state = {k: v.double().numpy() for k, v in data["state"].items()}
-        # a seabeds file without the wander table: its speckle is drawn without wander
+        # a seabeds file without the wander or ceiling tables: its speckle is drawn without wander, unbent
         state.setdefault("speckle_wander", np.zeros(len(state["speckle_levels"])))
+        state.setdefault("speckle_ceiling", np.full(len(state["speckle_levels"]), np.inf))
         seabeds = Seabeds(**{k: state[k] for k in TABLES}, path=path)
         ok = seabeds.shapes_agree()
     except (KeyError, TypeError, AttributeError):

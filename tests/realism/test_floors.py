@@ -183,3 +183,28 @@ def test_floor_label_names_the_chips_floor_for_lays_and_drops_the_renders_rocks(
     relabelled = floor_label(label, choices, seed=3, index=0)
     assert relabelled.clutter == () and relabelled.extra["kept"] == 1 and relabelled.scene == label.scene
     assert "clutter" not in relabelled.to_json() and relabelled.to_json()["floor"]["speckle"] in map(str, choices)
+
+
+def test_on_floor_gives_a_clipped_highlight_the_floors_grain():
+    """A render's highlight clipped to flat white comes out speckled as its floor, bent under white (no pixel at 1)."""
+    render, mask = _scene()
+    render[mask == 1] = 1.0
+    floor = _speckle(0.2, 8)
+    out = on_floor(render, mask, floor)
+    highlight = out[mask == 1]
+    assert highlight.max() < 1.0
+    contrast = lambda x: x.std() / x.mean()
+    assert contrast(highlight) > 0.6 * contrast(floor)  # looks 4: 0.5
+    assert np.median(highlight) > 2 * np.median(floor)   # and still bright
+
+
+def test_display_bend():
+    from sasmi.realism.display import KNEE, bent
+
+    v = np.linspace(0.0, 3.0, 3001)
+    out = bent(v, 0.9)
+    np.testing.assert_array_equal(out[v <= KNEE * 0.9], v[v <= KNEE * 0.9])  # the bulk of a chip untouched
+    assert out.max() < 0.9 and (np.diff(out) > 0).all()                     # under the ceiling, order kept
+    step = np.diff(out) / np.diff(v)
+    assert step[np.searchsorted(v, KNEE * 0.9)] == pytest.approx(1.0, abs=0.01)  # no kink at the knee
+    np.testing.assert_array_equal(bent(v, np.inf), v)

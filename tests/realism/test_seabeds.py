@@ -126,14 +126,17 @@ def test_target_chips_give_the_speckle_of_their_floor_not_of_their_target(tmp_pa
 
 
 def _grainier_in_the_dark(folder, slope, n=6, seed=2):
-    """Banded floor chips whose speckle's deviations grow as (level / median)^slope: contrast falling with level."""
+    """Banded floor chips whose speckle's deviations grow as (level / median)^slope: contrast falling with level.
+    Their levels are a real chip's: a floor around 0.15 and one pixel, alone, at the display's top."""
     rng = np.random.default_rng(seed)
     for i in range(n):
-        level = 0.25 * np.exp(0.6 * np.sin(np.arange(SIZE) / 9.0 + rng.uniform(0, 6)))[:, None] * np.ones(SIZE)
+        level = 0.15 * np.exp(0.6 * np.sin(np.arange(SIZE) / 9.0 + rng.uniform(0, 6)))[:, None] * np.ones(SIZE)
         speckle = _grainy_speckle(rng)
         mean = speckle.mean()
         grain = mean + (speckle - mean) * (level / np.median(level)) ** slope
-        write_gray(folder / f"floor_{i}.png", np.clip(level * grain, 0, 1))
+        chip = np.clip(level * grain, 0, 1)
+        chip[rng.integers(SIZE), rng.integers(SIZE)] = 0.92
+        write_gray(folder / f"floor_{i}.png", chip)
     return folder
 
 
@@ -150,7 +153,7 @@ def test_drawn_floors_keep_how_their_sources_speckle_contrast_follows_the_level(
         np.testing.assert_allclose(fitted.speckle_slope, measured)
         drawn = [contrast_slope(np.clip(draw_floor(fitted, (SIZE, SIZE), np.random.default_rng(i)), 0, 1), everywhere)
                  for i in range(12)]
-        assert np.median(drawn) == pytest.approx(slope, abs=0.1)
+        assert np.median(drawn) == pytest.approx(np.median(measured), abs=0.1)
 
 
 def _wandering_floors(folder, wander, n=6, seed=3):
@@ -184,6 +187,23 @@ def test_drawn_floors_keep_how_much_their_sources_speckle_contrast_wanders(tmp_p
     assert spreads[0.3] > 1.3 * spreads[0.0]  # (the wander shows in the spread)
 
 
+def test_drawn_floors_stay_under_their_speckle_chips_brightest_level(tmp_path):
+    """Bright floors whose brightest pixel is 0.8: a seabed times a speckle drawn from them would pass it (and clip
+    to white in clusters); bent, every drawn floor stays under it and few pixels come near it, as in the sources."""
+    rng = np.random.default_rng(4)
+    folder = tmp_path / "bright"
+    for i in range(6):
+        chip = np.minimum(0.25 * _grainy_speckle(rng), 0.8)
+        chip[rng.integers(SIZE), rng.integers(SIZE)] = 0.8
+        write_gray(folder / f"floor_{i}.png", chip)
+    fitted = fit_seabeds(folder)
+    np.testing.assert_allclose(fitted.speckle_ceiling, 0.8, atol=1 / 255)
+    floors = np.stack([draw_floor(fitted, (SIZE, SIZE), np.random.default_rng(i)) for i in range(8)])
+    assert floors.max() < 0.8
+    assert (floors > 0.75).mean() < 0.01
+    assert np.median(floors) == pytest.approx(np.median(0.25 * _grainy_speckle(rng)), rel=0.2)  # the bulk unbent
+
+
 def test_seabed_floor_replaces_the_renders_speckle_with_a_drawn_one(seabeds):
     rng = np.random.default_rng(0)
     mask = np.zeros((SIZE, SIZE), np.uint8)
@@ -213,7 +233,7 @@ def test_renders_on_seabed_floors_keep_their_labels(seabeds, render_set, tmp_pat
 def test_seabeds_file_round_trip_and_bad_files(seabeds, tmp_path):
     path = save_seabeds(seabeds, tmp_path / "seabeds.pt", {"note": "test"})
     loaded = load_seabeds(path)
-    for table in ("amplitude", "speckle_power", "speckle_levels", "speckle_slope", "speckle_wander"):
+    for table in ("amplitude", "speckle_power", "speckle_levels", "speckle_slope", "speckle_wander", "speckle_ceiling"):
         np.testing.assert_allclose(getattr(loaded, table), getattr(seabeds, table), rtol=1e-6, atol=1e-7)
     assert loaded.path == path
     torch.load(path, weights_only=True)  # tensors and plain types only
@@ -229,6 +249,8 @@ def test_seabeds_file_round_trip_and_bad_files(seabeds, tmp_path):
             load_seabeds(bad)
     with pytest.raises(SasmiError, match="no such seabeds file"):
         load_seabeds(tmp_path / "none.pt")
-    no_wander = tmp_path / "no_wander.pt"  # a file without the wander table: its speckle drawn without wander
-    torch.save({**data, "state": {k: v for k, v in data["state"].items() if k != "speckle_wander"}}, no_wander)
-    np.testing.assert_array_equal(load_seabeds(no_wander).speckle_wander, np.zeros(len(seabeds.speckle_wander)))
+    older = tmp_path / "older.pt"  # a file without the wander and ceiling tables: drawn without wander, unbent
+    torch.save({**data, "state": {k: v for k, v in data["state"].items()
+                                  if k not in ("speckle_wander", "speckle_ceiling")}}, older)
+    np.testing.assert_array_equal(load_seabeds(older).speckle_wander, np.zeros(len(seabeds.speckle_wander)))
+    assert np.isinf(load_seabeds(older).speckle_ceiling).all()
