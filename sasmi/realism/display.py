@@ -20,6 +20,8 @@ def bent(value: np.ndarray, ceiling: float) -> np.ndarray:
     which it never reaches; an infinite ceiling bends nothing."""
     if not np.isfinite(ceiling):
         return value
+    if ceiling <= 0.0:  # a black chip: nothing above its black
+        return np.minimum(value, 0.0)
     knee = KNEE * ceiling
     over = np.maximum(value - knee, 0.0)
     return np.where(value > knee, knee - (ceiling - knee) * np.expm1(-over / (ceiling - knee)), value)

@@ -115,7 +115,7 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
     region = ndimage.binary_dilation(mask > 0, iterations=FEATHER)
     weight = np.maximum(ndimage.gaussian_filter(region.astype(np.float64), 1.0), region)
     # bent under white (sasmi.realism.display), not clipped: a bright highlight keeps its grain
-    laid_on = lambda laid: np.clip((1.0 - weight) * floor + weight * bent(laid, 1.0), 0.0, 1.0)
+    laid_on = lambda values: np.clip((1.0 - weight) * floor + weight * bent(values, 1.0), 0.0, 1.0)
     out = laid_on(laid)
     # a faint render target (visibility under 1) that `sasmi evaluate` still finds is found
     # through the render's speckle beside it, which the real floor replaces: lifting each to

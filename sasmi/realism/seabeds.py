@@ -20,9 +20,9 @@ times a speckle clips to white in clusters: a drawn floor is bent under its spec
 level (sasmi.realism.display). A seabeds file keeps, for each seafloor chip, the mean, the profile
 and the amplitudes, and for each chip that lends its speckle (those floor chips, or target chips'
 floors) the smoothed power spectrum, quantiles, contrast slope, wander and brightest level:
-statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds of the seafloor chips of the shared
-target chips' sonar and the speckle of those target chips' floors, so that `sasmi generate` lays
-renders on real-like floors anywhere.
+statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds
+of the seafloor chips of the shared target chips' sonar and the speckle of those target chips'
+floors, so that `sasmi generate` lays renders on real-like floors anywhere.
 """
 from __future__ import annotations
 
