@@ -11,7 +11,7 @@ import numpy as np
 
 # where the bend starts, as a fraction of the ceiling. On the shared train targets' floors the 99.9th percentile
 # is 0.73 (median) and the brightest pixel 0.90; floors drawn from them and bent from 0.6 of their speckle chip's
-# brightest level, 0.73 and 0.86 (from 0.8: 0.80 and 0.89; unbent: 0.82 and 1, clipped)
+# brightest level, 0.73 and 0.85 (from 0.8: 0.80 and 0.89; unbent: 0.82 and 1, clipped)
 KNEE = 0.6
 
 
