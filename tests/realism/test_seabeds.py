@@ -153,7 +153,7 @@ def test_drawn_floors_keep_how_their_sources_speckle_contrast_follows_the_level(
         np.testing.assert_allclose(fitted.speckle_slope, measured)
         drawn = [contrast_slope(np.clip(draw_floor(fitted, (SIZE, SIZE), np.random.default_rng(i)), 0, 1), everywhere)
                  for i in range(12)]
-        assert np.median(drawn) == pytest.approx(np.median(measured), abs=0.1)
+        assert np.median(drawn) == pytest.approx(np.median(measured), abs=0.07)  # the bend steepens it a little
 
 
 def _wandering_floors(folder, wander, n=6, seed=3):
