@@ -1,28 +1,28 @@
 """Real-like floors without real chips: a real floor's seabed and speckle spectra under fresh random phases.
 
-A floor chip blurred over SEABED px is its seabed (`seabed_of`): its patches, bands,
-ripples and range profile. Seen at COARSE px, the log of a seabed is its mean, its range profile
-(the mean of each range column) and a field whose Fourier amplitudes say how rough it is at each
-scale and in each direction. Drawing that field's phases afresh makes a new seabed of the same
-character that is no real chip (phase randomisation, Theiler et al. 1992). What is left of the
-chip over its seabed is its speckle: its grain (power spectrum) and its gray levels (quantiles)
-are the sonar's, and a render's speckle has neither, which a small classifier sees at once
-(docs/gan.md, *Drawn floors*). A speckle of both is drawn by iterating between the two
-(IAAFT, Schreiber & Schmitz 1996). Real speckle is not quite independent of its seabed: its
-contrast falls where the seabed is bright (the sonar's noise tells in the dark), which a seabed
-times a level-blind speckle lacks and a small classifier sees; each speckle chip's slope of contrast
-against level is kept, its speckle evened out by it before its grain and levels are taken, and a
-drawn speckle given it back over its new seabed (`contrast_slope`). Beyond its level, a real
-speckle's contrast also wanders from patch to patch, where an IAAFT speckle's is the same
-everywhere; each chip's excess wander is kept and a drawn speckle's contrast made to wander as much
-(`contrast_wander`). A real chip's display bends its brightest levels under a ceiling, where a seabed
-times a speckle clips to white in clusters: a drawn floor is bent under its speckle chip's brightest
-level (sasmi.realism.display). A seabeds file keeps, for each seafloor chip, the mean, the profile
-and the amplitudes, and for each chip that lends its speckle (those floor chips, or target chips'
-floors) the smoothed power spectrum, quantiles, contrast slope, wander and brightest level:
-statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds the seabeds
-of the seafloor chips of the shared target chips' sonar and the speckle of those target chips'
-floors, so that `sasmi generate` lays renders on real-like floors anywhere.
+A floor chip blurred over SEABED px is its seabed (`seabed_of`): its patches, bands, ripples and range
+profile. Seen at COARSE px, the log of a seabed is its mean, its range profile (the mean of each range
+column) and a field whose Fourier amplitudes say how rough it is at each scale and in each direction.
+Drawing that field's phases afresh makes a new seabed of the same character that is no real chip (phase
+randomisation, Theiler et al. 1992). What is left of the chip over its seabed is its speckle: its grain
+(power spectrum) and its gray levels (quantiles) are the sonar's, and a render's speckle has neither,
+which a small classifier sees at once (docs/gan.md, *Drawn floors*). A speckle of both is drawn by
+iterating between the two (IAAFT, Schreiber & Schmitz 1996), starting from a coherent speckle, whose
+bright pixels come in grains as a real one's do (started from shuffled levels, they stand alone among
+dim ones). Real speckle is not quite independent of its seabed: its contrast falls where the seabed is
+bright (the sonar's noise tells in the dark), which a seabed times a level-blind speckle lacks and a
+small classifier sees; each speckle chip's slope of contrast against level is kept, its speckle evened
+out by it before its grain and levels are taken, and a drawn speckle given it back over its new seabed
+(`contrast_slope`). Beyond its level, a real speckle's contrast also wanders from patch to patch, where
+an IAAFT speckle's is the same everywhere; each chip's excess wander is kept and a drawn speckle's
+contrast made to wander as much (`contrast_wander`). A real chip's display bends its brightest levels
+under a ceiling, where a seabed times a speckle clips to white in clusters: a drawn floor is bent under
+its speckle chip's brightest level (sasmi.realism.display). A seabeds file keeps, for each seafloor
+chip, the mean, the profile and the amplitudes, and for each chip that lends its speckle (those floor
+chips, or target chips' floors) the smoothed power spectrum, quantiles, contrast slope, wander and
+brightest level: statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds
+the seabeds of the seafloor chips of the shared target chips' sonar and the speckle of those target
+chips' floors, so that `sasmi generate` lays renders on real-like floors anywhere.
 """
 from __future__ import annotations
 
@@ -166,9 +166,9 @@ def _unexplained(level: np.ndarray, contrast: np.ndarray) -> float:
 def contrast_wander(speckle: np.ndarray, seabed: np.ndarray, keep: np.ndarray, stationary: np.ndarray,
                     field: np.ndarray) -> float:
     """How much a floor chip's speckle (over its seabed) wanders beyond its level: the wander under which
-    `stationary`, an IAAFT speckle of the chip's own grain and levels (whose blocks differ by chance alone), spreads its blocks' log
-    contrast beyond what the level explains as the chip's speckle does (`wandered` over `field`, a `wander_field`),
-    within [0, WANDER_LIMIT]. Real target chips' floors: about 0.1-0.3."""
+    `stationary`, an IAAFT speckle of the chip's own grain and levels (whose blocks differ by chance alone),
+    spreads its blocks' log contrast beyond what the level explains as the chip's speckle does (`wandered`
+    over `field`, a `wander_field`), within [0, WANDER_LIMIT]. Real target chips' floors: about 0.1-0.3."""
     from scipy.optimize import brentq
 
     real = _unexplained(*_block_contrast(speckle, seabed, keep))
@@ -256,18 +256,34 @@ def draw_seabed(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generat
     return _resized(np.exp(log), shape, "bilinear")
 
 
-def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator) -> np.ndarray:
-    """(SPECKLE, SPECKLE) > 0: a new speckle with chip `chip`'s grain and gray levels (IAAFT from shuffled levels)."""
-    return _iaaft(seabeds.speckle_power[chip], seabeds.speckle_levels[chip], rng)
+def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator, coherent: bool = True) -> np.ndarray:
+    """(SPECKLE, SPECKLE) > 0: a new speckle with chip `chip`'s grain and gray levels (IAAFT, started from a
+    coherent speckle; `coherent=False` starts from shuffled levels, for benchmarks/speckle_grains.py)."""
+    return _iaaft(seabeds.speckle_power[chip], seabeds.speckle_levels[chip], rng, coherent)
 
 
-def _iaaft(speckle_power: np.ndarray, speckle_levels: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def coherent_speckle(power: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(SPECKLE, SPECKLE) >= 0: |z|² of a complex Gaussian field z whose intensity has about the power spectrum
+    `power` (SPECKLE, SPECKLE // 2 + 1): an intensity's autocorrelation is its field's, squared (Goodman)."""
+    covariance = np.fft.irfft2(power, s=(SPECKLE, SPECKLE))
+    field = np.sqrt(np.maximum(covariance / max(covariance[0, 0], 1e-300), 0.0))  # its correlation's magnitude
+    field_power = np.maximum(np.fft.fft2(field).real, 0.0)
+    white = rng.standard_normal((SPECKLE, SPECKLE)) + 1j * rng.standard_normal((SPECKLE, SPECKLE))
+    return np.abs(np.fft.ifft2(np.sqrt(field_power) * np.fft.fft2(white))) ** 2
+
+
+def _iaaft(speckle_power: np.ndarray, speckle_levels: np.ndarray, rng: np.random.Generator,
+           coherent: bool = True) -> np.ndarray:
     power = _resized(speckle_power, (SPECKLE, SPECKLE // 2 + 1), "bilinear", align_corners=True)
+    power[0, 0] = 0.0  # the mean is the levels' to set
     amplitude = np.sqrt(np.maximum(power, 0.0))
-    amplitude[0, 0] = 0.0  # the mean is the levels' to set
     levels = np.interp(np.linspace(0.0, 1.0, SPECKLE * SPECKLE), np.linspace(0.0, 1.0, LEVELS), speckle_levels)
-    x = rng.permutation(levels).reshape(SPECKLE, SPECKLE)
+    # the levels in a coherent speckle's order, not shuffled: the iterations keep much of its phases, whose bright
+    # pixels come in grains as real ones do (a shuffle's stand alone among dim ones, a third more of them)
     ranked = np.empty_like(levels)
+    start = coherent_speckle(np.maximum(power, 0.0), rng) if coherent else rng.random((SPECKLE, SPECKLE))
+    ranked[np.argsort(start, axis=None)] = levels
+    x = ranked.reshape(SPECKLE, SPECKLE).copy()
     for _ in range(IAAFT_ROUNDS):
         spectrum = np.fft.rfft2(x)
         # x's phases under the source's amplitudes: z |A| / |z| costs a third of exp(1j * angle(z))

@@ -106,6 +106,71 @@ def test_drawn_speckle_has_its_sources_grain_and_levels(seabeds, tmp_path_factor
         assert abs(np.corrcoef(speckle.ravel(), source.ravel())[0, 1]) < 0.2  # new phases: not the source
 
 
+def _coherent_floors(folder, n=6, seed=4):
+    """Floor chips of fully developed speckle: |z|² of a complex Gaussian field blurred by a small PSF."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        z = rng.standard_normal((2, SIZE, SIZE))
+        intensity = sum(ndimage.gaussian_filter(part, (0.4, 0.8)) ** 2 for part in z)
+        write_gray(folder / f"floor_{i}.png", np.clip(0.2 * intensity / intensity.mean(), 0, 1))
+    return folder
+
+
+def _grains(x):
+    """The correlation of neighbouring pixels' squared deviations along range: bright pixels in grains."""
+    d = (x - x.mean()) ** 2
+    return _lag1(d, 1)
+
+
+def test_drawn_speckle_keeps_its_sources_bright_grains(tmp_path):
+    """Bright speckle pixels come in grains (a coherent sonar's intensity); a speckle of the same spectrum and
+    levels from shuffled pixels scatters them among dim ones (about 0.2 here against the source's 0.29)."""
+    from sasmi.images import list_images
+    from sasmi.preprocess import load_image
+
+    folder = _coherent_floors(tmp_path)
+    fitted = fit_seabeds(folder)
+    sources = [_grains(speckle_of(load_image(p, SIZE).astype(np.float64))) for p in list_images(folder)]
+    drawn = [_grains(draw_speckle(fitted, k, np.random.default_rng(k))) for k in range(len(sources))]
+    assert np.mean(drawn) == pytest.approx(np.mean(sources), abs=0.05)
+
+
+def test_speckle_grains_benchmark_tells_grains_from_a_shuffle_and_names_a_bad_folder(tmp_path, capsys):
+    """benchmarks/speckle_grains.py: a coherent speckle shows grains that a speckle of its grain and levels drawn
+    from shuffled levels lacks; lone bright pixels are counted in the rows asked; an empty --real folder gets one
+    line and exit 2."""
+    import importlib.util
+    import sys
+
+    from conftest import REPO
+
+    spec = importlib.util.spec_from_file_location("speckle_grains", REPO / "benchmarks" / "speckle_grains.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    from sasmi.images import list_images
+    from sasmi.preprocess import load_image
+
+    floors = _coherent_floors(tmp_path / "floors", n=2)
+    fitted = fit_seabeds(floors)
+    rows = np.arange(SIZE)
+    source = speckle_of(load_image(list_images(floors)[0], SIZE).astype(np.float64))
+    # the same grain (linear correlation) and levels, from shuffled levels: fewer grains, more lone bright pixels
+    shuffled = [draw_speckle(fitted, 0, np.random.default_rng(k), coherent=False) for k in range(3)]
+    assert bench.grains(source, rows) > max(bench.grains(x, rows) for x in shuffled) + 0.05
+    flat = 1.0 + 0.1 * np.random.default_rng(6).random((SIZE, SIZE))
+    flat[8:120:8, 8] = 5.0                      # 14 lone bright pixels, 8 px apart; those in rows 0-63 counted
+    assert bench.isolated(flat, np.arange(64)) == 7
+    seabeds = save_seabeds(fitted, tmp_path / "seabeds.pt")
+    (tmp_path / "empty").mkdir()
+    argv = sys.argv
+    try:
+        sys.argv = ["speckle_grains.py", "--seabeds", str(seabeds), "--real", str(tmp_path / "empty")]
+        assert bench.main() == 2
+    finally:
+        sys.argv = argv
+    assert "--real" in capsys.readouterr().err
+
+
 def test_target_chips_give_the_speckle_of_their_floor_not_of_their_target(tmp_path):
     """Target chips (a bright target and a black shadow across the centre rows) lend their floor's speckle alone."""
     rng = np.random.default_rng(1)
