@@ -1,28 +1,25 @@
 """Real-like floors without real chips: a real floor's seabed and speckle spectra under fresh random phases.
 
-A floor chip blurred over SEABED px is its seabed (`seabed_of`): its patches, bands, ripples and range
-profile. Seen at COARSE px, the log of a seabed is its mean, its range profile (the mean of each range
-column) and a field whose Fourier amplitudes say how rough it is at each scale and in each direction.
-Drawing that field's phases afresh makes a new seabed of the same character that is no real chip (phase
-randomisation, Theiler et al. 1992). What is left of the chip over its seabed is its speckle: its grain
-(power spectrum) and its gray levels (quantiles) are the sonar's, and a render's speckle has neither,
-which a small classifier sees at once (docs/gan.md, *Drawn floors*). A speckle of both is drawn by
-iterating between the two (IAAFT, Schreiber & Schmitz 1996), starting from a coherent speckle, whose
-bright pixels come in grains as a real one's do (started from shuffled levels, they stand alone among
-dim ones). Real speckle is not quite independent of its seabed: its contrast falls where the seabed is
-bright (the sonar's noise tells in the dark), which a seabed times a level-blind speckle lacks and a
-small classifier sees; each speckle chip's slope of contrast against level is kept, its speckle evened
-out by it before its grain and levels are taken, and a drawn speckle given it back over its new seabed
-(`contrast_slope`). Beyond its level, a real speckle's contrast also wanders from patch to patch, where
-an IAAFT speckle's is the same everywhere; each chip's excess wander is kept and a drawn speckle's
+A floor chip blurred over SEABED px is its seabed (`seabed_of`). Seen at COARSE px, the log of a seabed
+is its mean, its range profile and a field whose Fourier amplitudes say how rough it is at each scale
+and in each direction. Drawing that field's phases afresh makes a new seabed of the same character that
+is no real chip (phase randomisation, Theiler et al. 1992). What is left of the chip over its seabed is
+its speckle: its grain (power spectrum) and its gray levels (quantiles) are the sonar's, and a render's
+speckle has neither, which a small classifier sees at once (docs/gan.md, *Drawn floors*). A speckle of
+both is drawn by iterating between the two (IAAFT, Schreiber & Schmitz 1996), starting from a coherent
+speckle, whose bright pixels come in grains as a real one's do (started from shuffled levels, they stand
+alone among dim ones). Real speckle is not quite independent of its seabed: its contrast falls where the
+seabed is bright (the sonar's noise tells in the dark), which a seabed times a level-blind speckle lacks
+and a small classifier sees; each speckle chip's slope of contrast against level is kept, its speckle
+evened out by it before its grain and levels are taken, and a drawn speckle given it back over its new
+seabed (`contrast_slope`). Beyond its level, a real speckle's contrast also wanders from patch to patch,
+where an IAAFT speckle's is the same everywhere; each chip's excess wander is kept and a drawn speckle's
 contrast made to wander as much (`contrast_wander`). A real chip's display bends its brightest levels
 under a ceiling, where a seabed times a speckle clips to white in clusters: a drawn floor is bent under
-its speckle chip's brightest level (sasmi.realism.display). A seabeds file keeps, for each seafloor
-chip, the mean, the profile and the amplitudes, and for each chip that lends its speckle (those floor
-chips, or target chips' floors) the smoothed power spectrum, quantiles, contrast slope, wander and
-brightest level: statistics, no image. The shipped one (sasmi/weights/seabeds.pt, docs/models.md) holds
-the seabeds of the seafloor chips of the shared target chips' sonar and the speckle of those target
-chips' floors, so that `sasmi generate` lays renders on real-like floors anywhere.
+its speckle chip's brightest level (sasmi.realism.display). A seabeds file keeps statistics, no image:
+each seafloor chip's mean, profile and amplitudes, and each speckle chip's (floor chips, or target
+chips' floors) spectrum, quantiles, contrast slope, wander and brightest level. The shipped one
+(sasmi/weights/seabeds.pt, docs/models.md): the shared target chips' sonar.
 """
 from __future__ import annotations
 
@@ -257,8 +254,7 @@ def draw_seabed(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generat
 
 
 def draw_speckle(seabeds: Seabeds, chip: int, rng: np.random.Generator, coherent: bool = True) -> np.ndarray:
-    """(SPECKLE, SPECKLE) > 0: a new speckle with chip `chip`'s grain and gray levels (IAAFT, started from a
-    coherent speckle; `coherent=False` starts from shuffled levels, for benchmarks/speckle_grains.py)."""
+    """(SPECKLE, SPECKLE) > 0: a new speckle of chip `chip`'s grain and levels; `coherent=False`: a shuffled start."""
     return _iaaft(seabeds.speckle_power[chip], seabeds.speckle_levels[chip], rng, coherent)
 
 
