@@ -275,7 +275,7 @@ def _iaaft(speckle_power: np.ndarray, speckle_levels: np.ndarray, rng: np.random
     amplitude = np.sqrt(np.maximum(power, 0.0))
     levels = np.interp(np.linspace(0.0, 1.0, SPECKLE * SPECKLE), np.linspace(0.0, 1.0, LEVELS), speckle_levels)
     # the levels in a coherent speckle's order, not shuffled: the iterations keep much of its phases, whose bright
-    # pixels come in grains as real ones do (a shuffle's stand alone among dim ones, a third more of them)
+    # pixels come in grains as real ones do (a shuffle's stand alone among dim ones: benchmarks/speckle_grains.py)
     ranked = np.empty_like(levels)
     start = coherent_speckle(np.maximum(power, 0.0), rng) if coherent else rng.random((SPECKLE, SPECKLE))
     ranked[np.argsort(start, axis=None)] = levels
