@@ -135,8 +135,7 @@ def test_drawn_speckle_keeps_its_sources_bright_grains(tmp_path):
     assert np.mean(drawn) == pytest.approx(np.mean(sources), abs=0.05)
 
 
-def test_speckle_grains_benchmark_tells_grains_from_a_shuffle_and_names_a_bad_folder(tmp_path, capsys,
-                                                                                       monkeypatch):
+def test_speckle_grains_benchmark_tells_grains_from_a_shuffle_and_names_a_bad_folder(tmp_path, capsys, monkeypatch):
     """benchmarks/speckle_grains.py: a coherent speckle shows grains that a speckle of its grain and levels drawn
     from shuffled levels lacks; lone bright pixels are counted in the rows asked; an empty --real folder gets one
     line and exit 2."""
@@ -162,8 +161,9 @@ def test_speckle_grains_benchmark_tells_grains_from_a_shuffle_and_names_a_bad_fo
     flat[8:120:8, 8] = 5.0                      # 14 lone bright pixels, 8 px apart; those in rows 0-63 counted
     assert bench.isolated(flat, np.arange(64)) == 7
     seabeds = save_seabeds(fitted, tmp_path / "seabeds.pt")
-    (tmp_path / "empty").mkdir()
-    monkeypatch.setattr(sys, "argv", ["speckle_grains.py", "--seabeds", str(seabeds), "--real", str(tmp_path / "empty")])
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    monkeypatch.setattr(sys, "argv", ["speckle_grains.py", "--seabeds", str(seabeds), "--real", str(empty)])
     assert bench.main() == 2
     assert "--real" in capsys.readouterr().err
 
