@@ -270,14 +270,14 @@ def coherent_speckle(power: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def _iaaft(speckle_power: np.ndarray, speckle_levels: np.ndarray, rng: np.random.Generator,
            coherent: bool = True) -> np.ndarray:
-    power = _resized(speckle_power, (SPECKLE, SPECKLE // 2 + 1), "bilinear", align_corners=True)
+    power = np.maximum(_resized(speckle_power, (SPECKLE, SPECKLE // 2 + 1), "bilinear", align_corners=True), 0.0)
     power[0, 0] = 0.0  # the mean is the levels' to set
-    amplitude = np.sqrt(np.maximum(power, 0.0))
+    amplitude = np.sqrt(power)
     levels = np.interp(np.linspace(0.0, 1.0, SPECKLE * SPECKLE), np.linspace(0.0, 1.0, LEVELS), speckle_levels)
     # the levels in a coherent speckle's order, not shuffled: the iterations keep much of its phases, whose bright
     # pixels come in grains as real ones do (a shuffle's stand alone among dim ones: benchmarks/speckle_grains.py)
     ranked = np.empty_like(levels)
-    start = coherent_speckle(np.maximum(power, 0.0), rng) if coherent else rng.random((SPECKLE, SPECKLE))
+    start = coherent_speckle(power, rng) if coherent else rng.random((SPECKLE, SPECKLE))
     ranked[np.argsort(start, axis=None)] = levels
     x = ranked.reshape(SPECKLE, SPECKLE).copy()
     for _ in range(IAAFT_ROUNDS):
