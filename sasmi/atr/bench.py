@@ -5,7 +5,9 @@ by every way of using the synthetic chips, so that ways are compared pair by pai
 - real:      the drawn real targets and negatives alone (the baseline);
 - mixed:     those plus the synthetic targets (and synthetic negatives, when given);
 - alone:     the synthetic targets with the drawn real negatives (and synthetic negatives);
-- pretrain:  trained on synthetic targets and negatives first, then fine-tuned on the real draw.
+- pretrain:  trained on synthetic targets and negatives first, then fine-tuned on the real draw;
+- replay:    pretrained so, then fine-tuned on the real draw with the synthetic chips replayed
+             beside it (half of each class's share of a batch real, half synthetic).
 At 0 real chips per class no real target is used: `alone` trains on the synthetic targets and every
 real negative, and is paired with `real` at 40 per class (or the nearest count run).
 Each network is scored on real test chips of scene groups never trained on: accuracy, ROC AUC and
@@ -28,7 +30,7 @@ from sasmi.eval import classifier
 from sasmi.images import FolderLock, write_text
 from sasmi.preprocess import check_size
 
-WAYS = ("real", "mixed", "alone", "pretrain")
+WAYS = ("real", "mixed", "alone", "pretrain", "replay")
 YARDSTICK = 40  # real chips per class that the no-real-target arm is paired with
 
 
@@ -110,8 +112,10 @@ def train_arm(way: str, n: int | None, pools: Pools, seed: int, cfg: AtrConfig, 
         return classifier.train(_join(real_t, syn_t), _join(real_n, syn_n), **fit)
     if way == "alone":
         return classifier.train(syn_t, _join(real_n, syn_n), **fit)
-    pretrained = classifier.train(syn_t, syn_n if syn_n is not None else real_n, **fit)
-    return classifier.train(real_t, real_n, **fit, model=pretrained)
+    syn_n = syn_n if syn_n is not None else real_n
+    pretrained = classifier.train(syn_t, syn_n, **fit)
+    return classifier.train(real_t, real_n, **fit, model=pretrained,
+                            replay=(syn_t, syn_n) if way == "replay" else None)
 
 
 def arms(cfg: AtrConfig) -> list[tuple[int | None, str]]:

@@ -7,7 +7,7 @@ from pathlib import Path
 from sasmi.cli.arguments import flag_or_all
 from sasmi.cli.common import add_device
 
-WAYS = ("real", "mixed", "alone", "pretrain")  # as sasmi.atr.bench.WAYS, which a test holds it to
+WAYS = ("real", "mixed", "alone", "pretrain", "replay")  # as sasmi.atr.bench.WAYS, which a test holds it to
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     a = sub.add_parser("atr-bench", help="does synthetic data make a target/seafloor classifier better on real chips?",
                        description="Trains a classifier on real chips, and with synthetic chips used in several ways "
-                                   "(mixed in, alone, pretrained then fine-tuned), over several seeds that share "
+                                   "(mixed in, alone, pretrained then fine-tuned, with or without them replayed), over several seeds that share "
                                    "their real draws, and scores it on real test chips: accuracy, ROC AUC, Pd at a "
                                    "false-alarm rate, and paired differences with 95 %% intervals. Resumes when "
                                    "rerun. See docs/atr.md.")

@@ -71,12 +71,15 @@ def augment(x: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
 
 
 def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, net: str = "small",
-          batch: int = 32, lr: float = 1e-3, model: nn.Module | None = None, device="cpu") -> nn.Module:
+          batch: int = 32, lr: float = 1e-3, model: nn.Module | None = None, device="cpu",
+          replay: tuple[np.ndarray, np.ndarray] | None = None) -> nn.Module:
     """Balanced batches (half each class, whatever the pool sizes) from two (N, S, S) pools in [0, 1].
 
     `model` continues training a network (fine-tuning after pretraining) instead of a new one.
+    `replay` (positives, negatives) fills half of each class's share of every batch: a few chips
+    then set the network's course without it forgetting the many it was pretrained on.
     """
-    if len(positives) == 0 or len(negatives) == 0:
+    if len(positives) == 0 or len(negatives) == 0 or (replay is not None and min(map(len, replay)) == 0):
         raise SasmiError("a classifier needs chips of both classes")
     gen = torch.Generator().manual_seed(seed)
     if model is None:
@@ -86,10 +89,16 @@ def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, n
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     pools = [torch.from_numpy(negatives), torch.from_numpy(positives)]
     half = batch // 2
+    replayed = [torch.from_numpy(replay[1]), torch.from_numpy(replay[0])] if replay is not None else None
     y = torch.cat([torch.zeros(half), torch.ones(half)]).to(device)
     model.train()
     for _ in range(steps):
-        picks = [pool[torch.randint(len(pool), (half,), generator=gen)] for pool in pools]
+        if replayed is None:
+            picks = [pool[torch.randint(len(pool), (half,), generator=gen)] for pool in pools]
+        else:
+            picks = [torch.cat([pool[torch.randint(len(pool), (half - half // 2,), generator=gen)],
+                                old[torch.randint(len(old), (half // 2,), generator=gen)]])
+                     for pool, old in zip(pools, replayed)]
         x = augment(unit_to_signed(torch.cat(picks)[:, None].float()), gen).to(device)  # (B, 1, S, S) in [-1, 1]
         loss = F.binary_cross_entropy_with_logits(model(x), y)
         opt.zero_grad(set_to_none=True)

@@ -125,7 +125,7 @@ def test_atr_bench_learns_a_separable_toy_every_way_and_resumes(tmp_path, capsys
     assert set(metrics["results"]) == {"0", "4", "all"}
     assert set(metrics["results"]["0"]) == {"alone"}  # no real target: only the synthetic targets can be used
     for n in ("4", "all"):
-        assert set(metrics["results"][n]) == {"real", "mixed", "alone", "pretrain"}
+        assert set(metrics["results"][n]) == {"real", "mixed", "alone", "pretrain", "replay"}
     for ways in metrics["results"].values():
         for m in ways.values():
             assert len(m["auc"]["values"]) == 2 and 0.0 <= m["pd"]["mean"] <= 1.0
@@ -136,7 +136,7 @@ def test_atr_bench_learns_a_separable_toy_every_way_and_resumes(tmp_path, capsys
     assert metrics["counts"]["syn_negatives"] == 12
     assert (out / "atr_bench.png").is_file() and "pretrain" in (out / "table.md").read_text()
     lines = (out / "runs.jsonl").read_text().splitlines()
-    assert len(lines) == 1 + 2 * (1 + 4 + 4)  # the settings, then one line per arm and seed
+    assert len(lines) == 1 + 2 * (1 + 5 + 5)  # the settings, then one line per arm and seed
     capsys.readouterr()
     assert main([*argv, "--out", str(out)]) == 0  # a rerun trains nothing: every run is on file
     assert "seed" not in capsys.readouterr().err and (out / "runs.jsonl").read_text().splitlines() == lines
@@ -192,6 +192,30 @@ def test_pd_is_read_at_the_false_alarm_rate():
     m = score(Brightness(), targets, negatives, pfa=0.05)
     assert m["pd"] == pytest.approx(0.05, abs=0.011)  # as bright as the negatives: Pd ≈ Pfa
     assert score(Brightness(), np.full_like(targets[:10], 0.95), negatives, pfa=0.05)["pd"] == 1.0
+
+
+def test_replayed_chips_fill_half_of_each_class_in_every_batch():
+    from sasmi.eval import classifier
+
+    class Recorder(torch.nn.Module):  # remembers the level of each chip it is shown
+        def __init__(self):
+            super().__init__()
+            self.w, self.seen = torch.nn.Parameter(torch.ones(())), []
+
+        def forward(self, x):
+            self.seen.append(x.mean(dim=(1, 2, 3)).detach())
+            return self.w * x.mean(dim=(1, 2, 3))
+
+    def level(v, n):  # flat chips: flips and shifts leave them as they are
+        return np.full((n, 16, 16), v, np.float32)
+
+    model = Recorder()
+    classifier.train(level(0.2, 3), level(0.4, 5), steps=3, seed=0, batch=8, model=model,
+                     replay=(level(0.6, 7), level(0.8, 9)))
+    for batch in model.seen:  # negatives, then targets, as the labels run; in [-1, 1]
+        assert batch.tolist() == pytest.approx([-0.2, -0.2, 0.6, 0.6, -0.6, -0.6, 0.2, 0.2])
+    with pytest.raises(Exception, match="both classes"):
+        classifier.train(level(0.2, 3), level(0.4, 5), steps=1, seed=0, replay=(level(0.6, 2), level(0.8, 0)))
 
 
 def test_the_command_line_knows_the_bench_ways():
