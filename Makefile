@@ -34,8 +34,9 @@ demo: setup
 	$(BIN)/sasmi sheet demo/renders demo/chips --out demo/contact_sheet.png
 	@echo "demo: render | realistic chip | its mask outline in demo/contact_sheet.png; COCO labels in demo/chips_coco.json"
 
+# test files on up to 4 workers (pytest-xdist; 2 on a 2-core machine), each file on one worker
 test: setup
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n auto --maxprocesses 4 --dist loadfile
 
 bench: setup
 	$(BIN)/python benchmarks/render.py

@@ -35,6 +35,20 @@ def disk_full_at(monkeypatch, under: Path, k: int | None = None) -> list[str]:
     return seen
 
 
+# Files that take minutes, longest first. `make test` runs the files on two workers (pytest-xdist,
+# --dist loadfile) in collection order: started last, one of these would run on alone at the end.
+LONG_FILES = ("test_notebooks.py", "test_calibrate.py", "test_fit.py", "test_sigterm.py", "test_fit_scene.py",
+              "test_evaluate_report.py", "test_weights.py")
+
+
+def pytest_collection_modifyitems(items):
+    def rank(item) -> int:
+        name = item.path.name
+        return LONG_FILES.index(name) if name in LONG_FILES else len(LONG_FILES)
+
+    items.sort(key=rank)  # stable: within a file and among the rest, the order stays
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _torch_one_thread():
     """Tiny tensors on a machine of few cores beside Dr.Jit's own threads: more torch threads only wait on each other."""
