@@ -25,10 +25,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     a = sub.add_parser("atr-bench", help="does synthetic data make a target/seafloor classifier better on real chips?",
                        description="Trains a classifier on real chips, and with synthetic chips used in several ways "
-                                   "(mixed in, alone, pretrained then fine-tuned, with or without them replayed), over several seeds that share "
-                                   "their real draws, and scores it on real test chips: accuracy, ROC AUC, Pd at a "
-                                   "false-alarm rate, and paired differences with 95 %% intervals. Resumes when "
-                                   "rerun. See docs/atr.md.")
+                                   "(mixed in, alone, pretrained then fine-tuned, with or without them replayed), "
+                                   "over several seeds that share their real draws, and scores it on real test "
+                                   "chips: accuracy, ROC AUC, Pd at a false-alarm rate, and paired differences "
+                                   "with 95 % intervals. Resumes when rerun. See docs/atr.md.")
     a.add_argument("--real-train", type=Path, required=True, help="folder with targets/ and seafloor/")
     a.add_argument("--real-test", type=Path, required=True,
                    help="folder with targets/ and seafloor/, of scene groups never trained on")

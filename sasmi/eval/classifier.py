@@ -76,8 +76,8 @@ def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, n
     """Balanced batches (half each class, whatever the pool sizes) from two (N, S, S) pools in [0, 1].
 
     `model` continues training a network (fine-tuning after pretraining) instead of a new one.
-    `replay` (positives, negatives) fills half of each class's share of every batch: a few chips
-    then set the network's course without it forgetting the many it was pretrained on.
+    `replay` (positives, negatives) fills half of each class's share of every batch, so that
+    fine-tuning on a few chips does not pull the network away from the many it was pretrained on.
     """
     if len(positives) == 0 or len(negatives) == 0 or (replay is not None and min(map(len, replay)) == 0):
         raise SasmiError("a classifier needs chips of both classes")
@@ -97,8 +97,8 @@ def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, n
             picks = [pool[torch.randint(len(pool), (half,), generator=gen)] for pool in pools]
         else:
             picks = [torch.cat([pool[torch.randint(len(pool), (half - half // 2,), generator=gen)],
-                                old[torch.randint(len(old), (half // 2,), generator=gen)]])
-                     for pool, old in zip(pools, replayed)]
+                                again[torch.randint(len(again), (half // 2,), generator=gen)]])
+                     for pool, again in zip(pools, replayed)]
         x = augment(unit_to_signed(torch.cat(picks)[:, None].float()), gen).to(device)  # (B, 1, S, S) in [-1, 1]
         loss = F.binary_cross_entropy_with_logits(model(x), y)
         opt.zero_grad(set_to_none=True)
