@@ -87,18 +87,16 @@ def train(positives: np.ndarray, negatives: np.ndarray, steps: int, seed: int, n
         model = make(net)
     model = model.to(device)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
-    pools = [torch.from_numpy(negatives), torch.from_numpy(positives)]
     half = batch // 2
-    replayed = [torch.from_numpy(replay[1]), torch.from_numpy(replay[0])] if replay is not None else None
+    # per class (negatives, then targets): the pools its half of a batch is drawn from, and how many from each
+    shares = [[(torch.from_numpy(negatives), half)], [(torch.from_numpy(positives), half)]]
+    if replay is not None:
+        for share, again in zip(shares, (replay[1], replay[0])):
+            share[:] = [(share[0][0], half - half // 2), (torch.from_numpy(again), half // 2)]
     y = torch.cat([torch.zeros(half), torch.ones(half)]).to(device)
     model.train()
     for _ in range(steps):
-        if replayed is None:
-            picks = [pool[torch.randint(len(pool), (half,), generator=gen)] for pool in pools]
-        else:
-            picks = [torch.cat([pool[torch.randint(len(pool), (half - half // 2,), generator=gen)],
-                                again[torch.randint(len(again), (half // 2,), generator=gen)]])
-                     for pool, again in zip(pools, replayed)]
+        picks = [pool[torch.randint(len(pool), (k,), generator=gen)] for share in shares for pool, k in share]
         x = augment(unit_to_signed(torch.cat(picks)[:, None].float()), gen).to(device)  # (B, 1, S, S) in [-1, 1]
         loss = F.binary_cross_entropy_with_logits(model(x), y)
         opt.zero_grad(set_to_none=True)
