@@ -19,7 +19,7 @@ under a ceiling, where a seabed times a speckle clips to white in clusters: a dr
 its speckle chip's brightest level (sasmi.realism.display). A seabeds file keeps statistics, no image:
 each seafloor chip's mean, profile and amplitudes, and each speckle chip's (floor chips, or target
 chips' floors) spectrum, quantiles, contrast slope, wander and brightest level. The shipped one
-(sasmi/weights/seabeds.pt, docs/models.md): the shared target chips' sonar.
+(sasmi/weights/seabeds.pt, docs/models.md) holds those of the shared target chips' sonar.
 """
 from __future__ import annotations
 
