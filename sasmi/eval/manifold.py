@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from sasmi.eval.metrics import Estimate, as_features, mean_known, one_blas_thread, replicates
+from sasmi.eval.metrics import Estimate, as_features, every_blas_thread, mean_known, one_blas_thread, replicates
 from sasmi.eval.neighbours import distance_blocks, kth_neighbour_radius, within_any_ball
 
 DENSE_BYTES = 256 * 2**20  # the real halves' replicates share one float32 N × N distance matrix up to this size
@@ -56,8 +56,9 @@ def precision_recall_real_split(feats_real: np.ndarray, k: int = 3, n: int = 100
     half = len(x) // 2
     if len(x) ** 2 * 4 <= DENSE_BYTES:  # every split's distances are in one matrix: computed once, not per split
         d = np.empty((len(x), len(x)), np.float32)
-        for start, block in distance_blocks(x, x):
-            d[start:start + len(block)] = block
+        with every_blas_thread():
+            for start, block in distance_blocks(x, x):
+                d[start:start + len(block)] = block
         np.fill_diagonal(d, np.inf)
         def compute(order):
             return _precision_recall_within(d, order[:half], order[half:2 * half], k)
@@ -98,7 +99,7 @@ def real_coverage(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n:
         n = 1  # every draw would be the whole generated set
     rng = np.random.default_rng(seed)
     hits = np.zeros(len(real))
-    with one_blas_thread():
+    with one_blas_thread() if n > 1 else every_blas_thread():
         for _ in range(n):
             hits += on_manifold(real, fake[rng.choice(len(fake), m, replace=False)], k)
     return hits / n

@@ -89,6 +89,28 @@ def test_fid_rank_deficient_matches_full_eigen_route():
     assert ev.fid(small_a @ q.T, small_b @ q.T) == pytest.approx(ev.fid(small_a, small_b), rel=1e-9)
 
 
+def test_fid_through_the_cholesky_factor_matches_a_qr_and_svd_of_the_data():
+    # N > D: the Cholesky factor of the covariance and an eigenproblem, against the QR of the centred rows
+    # and an SVD (the textbook-stable route), on covariances of condition up to 1e8
+    rng = np.random.default_rng(6)
+    d = 48
+    basis = np.linalg.qr(rng.standard_normal((d, d)))[0]
+    a = (rng.standard_normal((500, d)) * np.logspace(0, -4, d)) @ basis + 0.1
+    b = (rng.standard_normal((700, d)) * np.logspace(0, -4, d) * 1.2) @ basis
+
+    def qr_svd(x, y):
+        fx, fy = (np.linalg.qr((v - v.mean(0)) / np.sqrt(len(v) - 1), mode="r") for v in (x, y))
+        root = np.linalg.svd(fx @ fy.T, compute_uv=False).sum()
+        return np.sum((x.mean(0) - y.mean(0)) ** 2) + np.sum(fx**2) + np.sum(fy**2) - 2 * root
+
+    assert ev._cov_factor(a).invertible and ev._cov_factor(b).invertible
+    assert ev.fid(a, b) == pytest.approx(qr_svd(a, b), rel=1e-9)
+    # a constant feature makes the covariance singular: the QR route, and the FID of the other features
+    padded_a, padded_b = np.c_[a, np.full(len(a), 3.0)], np.c_[b, np.full(len(b), 3.0)]
+    assert not ev._cov_factor(padded_a).invertible
+    assert ev.fid(padded_a, padded_b) == pytest.approx(ev.fid(a, b), rel=1e-9)
+
+
 @pytest.mark.parametrize("n", [40, 300])  # fewer and more chips than φ's dimensions
 def test_a_resample_counted_by_its_distinct_rows_has_the_fid_of_the_resample_itself(n):
     rng = np.random.default_rng(3)
@@ -283,3 +305,28 @@ def test_blocked_neighbours_equal_the_dense_matrix(monkeypatch, block_bytes):
     np.testing.assert_array_equal(idx, np.argsort(d, axis=1)[:, :3])
     np.testing.assert_allclose(dist, np.sort(d, axis=1)[:, :3], rtol=0, atol=1e-3 * 255 * 128)
     assert np.all(dist[:, 0] <= 128)  # the copies found, each within one gray level rms
+
+
+def test_the_evaluations_gray_level_distance_is_the_gan_terms_energy_distance():
+    import torch
+
+    from sasmi.eval.evaluate import level_distance
+    from sasmi.gan.losses import energy_distance
+
+    gen = torch.Generator().manual_seed(0)
+    a, b = torch.rand(50, 27, generator=gen), torch.rand(37, 27, generator=gen) * 0.8 + 0.1
+    for x, y in ((a, b), (a[:25], a[25:])):  # apart, and two halves of one set (≈ 0)
+        assert level_distance(x, y, block=7) == pytest.approx(float(energy_distance(x.double(), y.double())), abs=1e-9)
+
+
+def test_the_evaluations_gray_levels_are_the_gan_terms_quantiles():
+    import torch
+
+    from sasmi.eval.evaluate import gray_levels
+    from sasmi.gan.losses import gray_levels as gan_levels
+    from sasmi.preprocess import unit_to_signed
+
+    images = np.random.default_rng(7).integers(0, 256, (11, 20, 20), np.uint8)
+    images[3] //= 4  # a dark chip: its quantiles fall between other order statistics
+    expected = gan_levels(unit_to_signed(torch.from_numpy(images).float()[:, None] / 255.0))
+    assert torch.allclose(gray_levels(images, block=4), expected, atol=1e-6)
