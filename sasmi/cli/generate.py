@@ -26,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spp", type=int, default=16, help="samples per pixel")
     p.add_argument("--workers", type=int, default=1,
                    help="render processes, a local Dask cluster when > 1: they render the next batch while this "
-                        "process translates one (default: 1; 2 on 2 cores is faster)")
+                        "process translates one (default: 1; on 2 cores 2 was faster on one CPU and slower on another: docs/results.md)")
     p.add_argument("--floors", metavar="DIR",
                    help="lay each render's target and shadow on a real seafloor chip first, as `sasmi fit --floors` "
                         "did for the generator it trained (needs --real); without it, the shipped generator's renders "
