@@ -16,4 +16,4 @@ $sasmi generate seafloor_only --generator "$w/sasgan.pt" --seabeds "$w/seabeds.p
     --workers 2 --out "$runs/shipped-recipe/negatives-$count"
 $sasmi atr-bench --real-train "$runs/split/train" --real-test "$runs/split/validation" \
     --synthetic "$runs/shipped-recipe/targets-$count" --synthetic-negatives "$runs/shipped-recipe/negatives-$count" \
-    --ways real alone pretrain --real-per-class 0 10 40 --out "$runs/atr-shipped-recipe-$count"
+    --ways real alone pretrain replay --real-per-class 0 10 40 --out "$runs/atr-shipped-recipe-$count"
