@@ -164,24 +164,22 @@ def gain_swing(image01: np.ndarray, floor: np.ndarray) -> float:
     or more on it."""
     h, w = image01.shape
     log_image = np.log(np.maximum(image01.astype(np.float64), 1.0 / 255.0))
-    counts = floor.sum(axis=1)
-    valid = counts >= w // 4
-    profile = np.array([np.median(log_image[r][floor[r]]) if valid[r] else 0.0 for r in range(h)])
+    valid = floor.sum(axis=1) >= w // 4
+    profile = np.zeros(h)
+    profile[valid] = np.nanmedian(np.where(floor, log_image, np.nan)[valid], axis=1)  # all rows at once
     return profile_swing(profile, valid, w / 128.0)
 
 
 def speckle_looks(image01: np.ndarray, floor: np.ndarray, block: int) -> float:
     """Median over floor blocks of mean² / variance (the equivalent number of looks)."""
-    h, w = image01.shape
-    looks = []
-    for r in range(0, h - block + 1, block):
-        for c in range(0, w - block + 1, block):
-            if floor[r:r + block, c:c + block].all():
-                b = image01[r:r + block, c:c + block].astype(np.float64)
-                mean, var = b.mean(), b.var(ddof=1)
-                if mean > 4.0 / 255.0 and var > 0:
-                    looks.append(mean * mean / var)
-    return float(np.median(looks)) if looks else float("nan")
+    rows, cols = image01.shape[0] // block, image01.shape[1] // block
+    def blocks(x):  # (rows, cols, block²): every whole block at once
+        return x[:rows * block, :cols * block].reshape(rows, block, cols, block).swapaxes(1, 2).reshape(rows, cols, -1)
+
+    b = blocks(image01.astype(np.float64))
+    mean, var = b.mean(axis=2), b.var(axis=2, ddof=1)
+    usable = blocks(floor).all(axis=2) & (mean > 4.0 / 255.0) & (var > 0)
+    return float(np.median(mean[usable] ** 2 / var[usable])) if usable.any() else float("nan")
 
 
 def _highpassed_floor(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
