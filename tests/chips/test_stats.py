@@ -208,3 +208,22 @@ def test_floor_level_over_a_mask_is_each_columns_median_there():
         expected = np.maximum(ndimage.uniform_filter1d(column, size=9, mode="nearest"), 1 / 255)
         np.testing.assert_array_equal(floor_level(image, where), expected)
 
+
+
+def test_speckle_looks_and_bands_are_those_of_each_whole_floor_block_and_row():
+    from sasmi.chips.stats import gain_swing, speckle_looks
+
+    rng = np.random.default_rng(9)
+    image = rng.gamma(3.0, 1.0 / 3.0, (70, 90)) * np.linspace(0.2, 0.5, 70)[:, None] ** 2  # blocks differ in level
+    floor = np.ones_like(image, dtype=bool)
+    floor[5:30, 40:75] = False  # a target's box: the blocks it touches and the rows it shortens are left out
+    looks = []  # the definition, block by block
+    for r in range(0, 70 - 8 + 1, 8):
+        for c in range(0, 90 - 8 + 1, 8):
+            if floor[r:r + 8, c:c + 8].all():
+                b = image[r:r + 8, c:c + 8]
+                looks.append(b.mean() ** 2 / b.var(ddof=1))
+    assert speckle_looks(image, floor, 8) == pytest.approx(np.median(looks), rel=1e-12)
+    valid = floor.sum(axis=1) >= 90 // 4
+    profile = [np.median(np.log(np.maximum(image[r][floor[r]], 1 / 255))) if valid[r] else 0.0 for r in range(70)]
+    assert gain_swing(image, floor) == pytest.approx(profile_swing(np.array(profile), valid, 90 / 128), rel=1e-12)
