@@ -98,11 +98,10 @@ def real_coverage(feats_real: np.ndarray, feats_fake: np.ndarray, k: int = 3, n:
     if m == len(fake):
         n = 1  # every draw would be the whole generated set
     rng = np.random.default_rng(seed)
-    hits = np.zeros(len(real))
-    with one_blas_thread() if n > 1 else every_blas_thread():
-        for _ in range(n):
-            hits += on_manifold(real, fake[rng.choice(len(fake), m, replace=False)], k)
-    return hits / n
+    with one_blas_thread():
+        hits = replicates(lambda rows: on_manifold(real, fake[rows], k),
+                          lambda i: rng.choice(len(fake), m, replace=False), n, desc="coverage")  # (n, N_real)
+    return hits.mean(axis=0)
 
 
 def on_manifold(points: np.ndarray, reference: np.ndarray, k: int = 3) -> np.ndarray:

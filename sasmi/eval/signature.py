@@ -8,10 +8,11 @@ cross-validated, how well they do together. A statistic far from 0.5 names a sig
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+
+from sasmi.eval.metrics import cores
 
 FOLDS = 5
 # name: what it measures. Range runs along x (columns), the track along y (rows)
@@ -51,7 +52,7 @@ def _contrast_wander(x: np.ndarray) -> np.ndarray:
 def chip_statistics(images: np.ndarray, block: int = 128) -> dict[str, np.ndarray]:
     """{statistic: (N,)} of (N, S, S) chips (uint8, or floats in [0, 1], taken to 8 bits), `block` chips at a time:
     no float copy of a whole large set is made."""
-    with ThreadPoolExecutor(len(os.sched_getaffinity(0))) as pool:  # numpy lets go of the GIL: every core
+    with ThreadPoolExecutor(cores()) as pool:  # numpy lets go of the GIL: every core
         parts = list(pool.map(_statistics, (images[i:i + block] for i in range(0, len(images), block))))
     return {name: np.concatenate([p[name] for p in parts]) if parts else np.zeros(0) for name in STATISTICS}
 

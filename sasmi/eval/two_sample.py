@@ -50,18 +50,17 @@ def two_sample_auc(real: np.ndarray, fake: np.ndarray, cfg: TwoSampleConfig, see
     steps = training_steps(len(real) + len(fake), folds, cfg)
     repeats = 1 if min(len(real), len(fake)) >= cfg.one_repeat_from else cfg.repeats
     aucs, p_fake = [], np.zeros(len(fake))
-    bar = tqdm(total=repeats * folds, desc="two-sample classifiers", unit="fold", leave=False, disable=None)
-    for repeat in range(repeats):
-        rng = np.random.default_rng(seed * 1000 + repeat)
-        fold_r, fold_f = rng.permutation(len(real)) % folds, rng.permutation(len(fake)) % folds
-        for k in range(folds):
-            model = classifier.train(fake[fold_f != k], real[fold_r != k], steps,
-                                     seed=seed * 1000 + repeat * folds + k, batch=cfg.batch)
-            pr, pf = classifier.predict(model, real[fold_r == k]), classifier.predict(model, fake[fold_f == k])
-            aucs.append(float(roc_auc_score(np.r_[np.zeros(len(pr)), np.ones(len(pf))], np.r_[pr, pf])))
-            p_fake[fold_f == k] += pf / repeats
-            bar.update()
-    bar.close()
+    with tqdm(total=repeats * folds, desc="two-sample classifiers", unit="fold", leave=False, disable=None) as bar:
+        for repeat in range(repeats):
+            rng = np.random.default_rng(seed * 1000 + repeat)
+            fold_r, fold_f = rng.permutation(len(real)) % folds, rng.permutation(len(fake)) % folds
+            for k in range(folds):
+                model = classifier.train(fake[fold_f != k], real[fold_r != k], steps,
+                                         seed=seed * 1000 + repeat * folds + k, batch=cfg.batch)
+                pr, pf = classifier.predict(model, real[fold_r == k]), classifier.predict(model, fake[fold_f == k])
+                aucs.append(float(roc_auc_score(np.r_[np.zeros(len(pr)), np.ones(len(pf))], np.r_[pr, pf])))
+                p_fake[fold_f == k] += pf / repeats
+                bar.update()
     return {"auc": float(np.mean(aucs)), "auc_std": float(np.std(aucs)), "folds": folds,
             "repeats": repeats, "steps": steps, "aucs": aucs, "p_fake": p_fake}
 
