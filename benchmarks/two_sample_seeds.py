@@ -11,6 +11,9 @@ with a 95 % interval (normal, over the seeds). A SET is a folder of images or a 
 Where does the signature lie? `--hide target` sets the band where target chips show their target and
 shadow (the middle quarter of the rows, from 5/16 of the range on) to each chip's median in every set and
 in the real chips, so that only the floor is judged; `--hide floor` keeps that band alone.
+
+The test's AUC grows with the number of chips it learns from: `--most N` judges each set by its first N
+chips (by name), so that sets of different sizes are compared at one size.
 """
 from __future__ import annotations
 
@@ -48,6 +51,8 @@ def main() -> int:
     p.add_argument("--seeds", type=int, default=4, help="classifier seeds (default: 4)")
     p.add_argument("--hide", choices=("none", "target", "floor"), default="none",
                    help="target: judge the floor alone; floor: the target band alone (default: whole chips)")
+    p.add_argument("--most", type=int, default=None, metavar="N",
+                   help="judge each set by its first N chips by name (default: all of them)")
     p.add_argument("sets", type=Path, nargs="+", help="chip sets; the first is the one the others are compared with")
     args = p.parse_args()
 
@@ -56,9 +61,12 @@ def main() -> int:
     from sasmi.eval.two_sample import two_sample_auc
 
     cfg = TwoSampleConfig()
+    if args.most is not None and args.most < 2:
+        print(f"two_sample_seeds: --most {args.most}: a set needs at least 2 chips", file=sys.stderr)
+        return 2
     try:
         real = hidden(chips_of(args.real, cfg.size), args.hide)
-        sets = {str(s): hidden(chips_of(s, cfg.size), args.hide) for s in args.sets}
+        sets = {str(s): hidden(chips_of(s, cfg.size)[:args.most], args.hide) for s in args.sets}
     except SasmiError as e:
         print(f"two_sample_seeds: {e}", file=sys.stderr)
         return 2

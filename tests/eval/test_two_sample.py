@@ -68,3 +68,17 @@ def test_hiding_the_target_band_judges_the_floor_alone():
            for name, fake in (("in band", in_band), ("off band", off_band)) for hide in ("target", "floor")}
     assert auc["in band", "floor"] > 0.9 and auc["off band", "target"] > 0.9, auc
     assert auc["in band", "target"] < 0.7 and auc["off band", "floor"] < 0.7, auc
+
+
+def test_the_seeds_benchmark_refuses_a_set_drawn_down_to_one_chip(monkeypatch, capsys):
+    """benchmarks/two_sample_seeds.py --most: fewer than 2 chips a set is one line and exit 2, before any chip is read."""
+    import importlib.util
+
+    from conftest import REPO
+
+    spec = importlib.util.spec_from_file_location("two_sample_seeds", REPO / "benchmarks" / "two_sample_seeds.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    monkeypatch.setattr("sys.argv", ["two_sample_seeds.py", "--real", "nowhere", "--most", "1", "nowhere"])
+    assert bench.main() == 2
+    assert capsys.readouterr().err.strip() == "two_sample_seeds: --most 1: a set needs at least 2 chips"
