@@ -49,9 +49,8 @@ def test_chips_are_shrunk_by_area():
     np.testing.assert_array_equal(resized(many, 32, block=3), resized(many, 32, block=7))  # block by block: the same
 
 
-def test_hiding_the_target_band_judges_the_floor_alone():
-    """benchmarks/two_sample_seeds.py --hide: a signature in the target band is seen with the floor hidden
-    (`floor`) and not with the band hidden (`target`); one outside the band the other way round."""
+def _seeds_benchmark():
+    """benchmarks/two_sample_seeds.py as a module."""
     import importlib.util
 
     from conftest import REPO
@@ -59,6 +58,13 @@ def test_hiding_the_target_band_judges_the_floor_alone():
     spec = importlib.util.spec_from_file_location("two_sample_seeds", REPO / "benchmarks" / "two_sample_seeds.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
+    return bench
+
+
+def test_hiding_the_target_band_judges_the_floor_alone():
+    """benchmarks/two_sample_seeds.py --hide: a signature in the target band is seen with the floor hidden
+    (`floor`) and not with the band hidden (`target`); one outside the band the other way round."""
+    bench = _seeds_benchmark()
     real = _speckle(60, 6.0, 0)
     in_band, off_band = _speckle(60, 6.0, 1), _speckle(60, 6.0, 1)
     in_band[:, 14:16, 16:24] = 1.0   # a bright stripe where target chips have their target (rows 12-20, cols 10-)
@@ -72,13 +78,31 @@ def test_hiding_the_target_band_judges_the_floor_alone():
 
 def test_the_seeds_benchmark_refuses_a_set_drawn_down_to_one_chip(monkeypatch, capsys):
     """benchmarks/two_sample_seeds.py --most: fewer than 2 chips a set is one line and exit 2, before any chip is read."""
-    import importlib.util
-
-    from conftest import REPO
-
-    spec = importlib.util.spec_from_file_location("two_sample_seeds", REPO / "benchmarks" / "two_sample_seeds.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = _seeds_benchmark()
     monkeypatch.setattr("sys.argv", ["two_sample_seeds.py", "--real", "nowhere", "--most", "1", "nowhere"])
     assert bench.main() == 2
     assert capsys.readouterr().err.strip() == "two_sample_seeds: --most 1: a set needs at least 2 chips"
+
+
+def test_the_seeds_benchmark_judges_each_set_by_its_first_chips(tmp_path, monkeypatch, capsys):
+    """--most N: each set enters the test with its first N chips by name (fewer where it has fewer), the real
+    chips all of them."""
+    from PIL import Image
+
+    import sasmi.eval.two_sample as two_sample
+
+    for name, count in (("real", 6), ("big", 5), ("small", 3)):
+        (tmp_path / name).mkdir()
+        for i in range(count):
+            Image.fromarray(np.full((16, 16), 10 * i, np.uint8)).save(tmp_path / name / f"{i}.png")
+    seen = []
+
+    def recorded(real, fake, cfg, seed=0):
+        seen.append((len(real), [int(round(c.mean() * 255)) for c in fake]))
+        return {"auc": 0.5}
+
+    monkeypatch.setattr(two_sample, "two_sample_auc", recorded)
+    monkeypatch.setattr("sys.argv", ["two_sample_seeds.py", "--real", str(tmp_path / "real"), "--seeds", "1",
+                                     "--most", "4", str(tmp_path / "big"), str(tmp_path / "small")])
+    assert _seeds_benchmark().main() == 0
+    assert seen == [(6, [0, 10, 20, 30]), (6, [0, 10, 20])], seen
