@@ -209,7 +209,6 @@ def test_floor_level_over_a_mask_is_each_columns_median_there():
         np.testing.assert_array_equal(floor_level(image, where), expected)
 
 
-
 def test_speckle_looks_and_bands_are_those_of_each_whole_floor_block_and_row():
     from sasmi.chips.stats import gain_swing, speckle_looks
 
