@@ -54,7 +54,7 @@ def translate(generator: torch.nn.Module, images01: np.ndarray, batch: int = 16,
         x = torch.from_numpy(np.ascontiguousarray(images01[i:i + batch], dtype=np.float32))[:, None]
         x = resize(x.clamp(0.0, 1.0), scaled)  # (b, 1, h', w') in [0, 1], min(h', w') == S
         x = F.pad(unit_to_signed(x), (0, pad_w, 0, pad_h), mode="reflect")  # (b, 1, h'+, w'+) in [-1, 1]
-        x = x.to(device)
+        x = x.to(device, memory_format=torch.channels_last)  # as load_generator lays out the weights
         if style_size:
             code = torch.stack([torch.randn(style_size, generator=torch.Generator().manual_seed(int(seed)))
                                 for seed in seeds[i:i + batch]])  # (b, style)
