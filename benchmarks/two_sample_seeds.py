@@ -12,8 +12,9 @@ Where does the signature lie? `--hide target` sets the band where target chips s
 shadow (the middle quarter of the rows, from 5/16 of the range on) to each chip's median in every set and
 in the real chips, so that only the floor is judged; `--hide floor` keeps that band alone.
 
-The test's AUC grows with the number of chips it learns from: `--most N` judges each set by its first N
-chips (by name), so that sets of different sizes are compared at one size.
+The test's AUC grows with the number of chips it learns from: `--most N` judges each set by N of its chips
+drawn at random (the same N on every run), so that sets of different sizes are compared at one size. Not its
+first N by name: real chips are named by survey line, and a folder's first lines are not the folder.
 """
 from __future__ import annotations
 
@@ -45,6 +46,13 @@ def hidden(chips: np.ndarray, hide: str) -> np.ndarray:
     return out
 
 
+def drawn(chips: np.ndarray, most: int | None) -> np.ndarray:
+    """`most` of the chips, drawn without repeats from a fixed stream, in their order; all of them for None."""
+    if most is None or most >= len(chips):
+        return chips
+    return chips[np.sort(np.random.default_rng(0).choice(len(chips), most, replace=False))]
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--real", type=Path, required=True, help="the real chips")
@@ -52,7 +60,7 @@ def main() -> int:
     p.add_argument("--hide", choices=("none", "target", "floor"), default="none",
                    help="target: judge the floor alone; floor: the target band alone (default: whole chips)")
     p.add_argument("--most", type=int, default=None, metavar="N",
-                   help="judge each set by its first N chips by name (default: all of them)")
+                   help="judge each set by N of its chips drawn at random, the same on every run (default: all of them)")
     p.add_argument("sets", type=Path, nargs="+", help="chip sets; the first is the one the others are compared with")
     args = p.parse_args()
 
@@ -66,7 +74,7 @@ def main() -> int:
         return 2
     try:
         real = hidden(chips_of(args.real, cfg.size), args.hide)
-        sets = {str(s): hidden(chips_of(s, cfg.size)[:args.most], args.hide) for s in args.sets}
+        sets = {str(s): hidden(drawn(chips_of(s, cfg.size), args.most), args.hide) for s in args.sets}
     except SasmiError as e:
         print(f"two_sample_seeds: {e}", file=sys.stderr)
         return 2

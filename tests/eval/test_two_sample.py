@@ -84,17 +84,18 @@ def test_the_seeds_benchmark_refuses_a_set_drawn_down_to_one_chip(monkeypatch, c
     assert capsys.readouterr().err.strip() == "two_sample_seeds: --most 1: a set needs at least 2 chips"
 
 
-def test_the_seeds_benchmark_judges_each_set_by_its_first_chips(tmp_path, monkeypatch, capsys):
-    """--most N: each set enters the test with its first N chips by name (fewer where it has fewer), the real
-    chips all of them."""
+def test_the_seeds_benchmark_draws_each_set_down_at_random(tmp_path, monkeypatch, capsys):
+    """--most N: each set enters the test with N of its chips drawn without repeats, the same N on every run and
+    not its first N by name (a real folder's first names are a few survey lines); a set of fewer with all of
+    them, the real chips all of them."""
     from PIL import Image
 
     import sasmi.eval.two_sample as two_sample
 
-    for name, count in (("real", 6), ("big", 5), ("small", 3)):
+    for name, count in (("real", 6), ("big", 20), ("small", 3)):
         (tmp_path / name).mkdir()
         for i in range(count):
-            Image.fromarray(np.full((16, 16), 10 * i, np.uint8)).save(tmp_path / name / f"{i}.png")
+            Image.fromarray(np.full((16, 16), 10 * i, np.uint8)).save(tmp_path / name / f"{i:02d}.png")
     seen = []
 
     def recorded(real, fake, cfg, seed=0):
@@ -105,4 +106,10 @@ def test_the_seeds_benchmark_judges_each_set_by_its_first_chips(tmp_path, monkey
     monkeypatch.setattr("sys.argv", ["two_sample_seeds.py", "--real", str(tmp_path / "real"), "--seeds", "1",
                                      "--most", "4", str(tmp_path / "big"), str(tmp_path / "small")])
     assert _seeds_benchmark().main() == 0
-    assert seen == [(6, [0, 10, 20, 30]), (6, [0, 10, 20])], seen
+    (real_big, big), (real_small, small) = seen
+    assert real_big == real_small == 6 and small == [0, 10, 20], seen
+    assert len(set(big)) == 4 and big == sorted(big) and set(big) <= {10 * i for i in range(20)}, big
+    assert big != [0, 10, 20, 30], big   # not the first four by name
+    seen.clear()
+    assert _seeds_benchmark().main() == 0
+    assert seen[0][1] == big, (seen, big)  # the same draw on every run
