@@ -60,7 +60,7 @@ def main() -> int:
     p.add_argument("--hide", choices=("none", "target", "floor"), default="none",
                    help="target: judge the floor alone; floor: the target band alone (default: whole chips)")
     p.add_argument("--most", type=int, default=None, metavar="N",
-                   help="judge each set by N of its chips drawn at random, the same on every run (default: all of them)")
+                   help="judge each set by N of its chips drawn at random, the same each run (default: all of them)")
     p.add_argument("sets", type=Path, nargs="+", help="chip sets; the first is the one the others are compared with")
     args = p.parse_args()
 
