@@ -240,7 +240,8 @@ def tsne_map(real: FeatureSet, sets: Sequence[FeatureSet], cfg: EvalConfig
     x = np.concatenate([s.phi[idx] for s, idx in chosen])  # (n, D)
     x = PCA(n_components=min(50, *x.shape), random_state=cfg.seed).fit_transform(x)
     perplexity = min(cfg.tsne_perplexity, max(2.0, (len(x) - 1) / 3.0))
-    xy = TSNE(perplexity=perplexity, init="pca", random_state=cfg.seed).fit_transform(x)  # (n, 2)
+    xy = TSNE(perplexity=perplexity, init="pca", max_iter=cfg.tsne_iterations,
+              random_state=cfg.seed).fit_transform(x)  # (n, 2)
     groups = [(s, idx, rng.choice(len(idx), min(cfg.thumbnails_per_set, len(idx)), replace=False))
               for s, idx in chosen]
     return groups, xy, perplexity

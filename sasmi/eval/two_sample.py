@@ -4,9 +4,10 @@
 (speckle, edges, gray-level texture). Here the small CNN of sasmi.eval.classifier learns real
 (0) against generated (1) on all folds but one and scores the held-out fold by ROC AUC:
 0.5 means it cannot tell them apart, 1.0 that it always can. K folds over R repeats give the
-spread (one repeat for large sets, whose folds alone pin the AUC). Every generated chip gets its
-held-out probability of being generated; the chips it finds most synthetic are drawn beside their
-nearest real chip in φ, so the signature can be seen.
+spread; a large set takes one repeat of which only some folds are held out, since their held-out
+chips alone pin the AUC and each classifier is the evaluation's slowest part. Every generated chip
+held out gets its probability of being generated; the chips it finds most synthetic are drawn
+beside their nearest real chip in φ, so the signature can be seen.
 """
 from __future__ import annotations
 
@@ -42,26 +43,30 @@ def resized(images: np.ndarray, size: int, block: int = 1024) -> np.ndarray:
 
 
 def two_sample_auc(real: np.ndarray, fake: np.ndarray, cfg: TwoSampleConfig, seed: int = 0) -> dict:
-    """ROC AUC of real (N, s, s) against fake (M, s, s), both in [0, 1]: mean and spread over folds and
-    repeats, and each fake chip's held-out probability of being generated (averaged over repeats)."""
+    """ROC AUC of real (N, s, s) against fake (M, s, s), both in [0, 1]: mean and spread over held-out folds and
+    repeats, and each fake chip's held-out probability of being generated (averaged over repeats; NaN for the
+    chips of large sets' folds that are never held out)."""
     from sklearn.metrics import roc_auc_score
 
     folds = max(2, min(cfg.folds, len(real), len(fake)))
     steps = training_steps(len(real) + len(fake), folds, cfg)
-    repeats = 1 if min(len(real), len(fake)) >= cfg.one_repeat_from else cfg.repeats
+    large = min(len(real), len(fake)) >= cfg.large_from
+    repeats = 1 if large else cfg.repeats
+    scored = min(folds, cfg.large_scored_folds) if large else folds
     aucs, p_fake = [], np.zeros(len(fake))
-    with tqdm(total=repeats * folds, desc="two-sample classifiers", unit="fold", leave=False, disable=None) as bar:
+    with tqdm(total=repeats * scored, desc="two-sample classifiers", unit="fold", leave=False, disable=None) as bar:
         for repeat in range(repeats):
             rng = np.random.default_rng(seed * 1000 + repeat)
             fold_r, fold_f = rng.permutation(len(real)) % folds, rng.permutation(len(fake)) % folds
-            for k in range(folds):
+            for k in range(scored):
                 model = classifier.train(fake[fold_f != k], real[fold_r != k], steps,
                                          seed=seed * 1000 + repeat * folds + k, batch=cfg.batch)
                 pr, pf = classifier.predict(model, real[fold_r == k]), classifier.predict(model, fake[fold_f == k])
                 aucs.append(float(roc_auc_score(np.r_[np.zeros(len(pr)), np.ones(len(pf))], np.r_[pr, pf])))
                 p_fake[fold_f == k] += pf / repeats
                 bar.update()
-    return {"auc": float(np.mean(aucs)), "auc_std": float(np.std(aucs)), "folds": folds,
+    p_fake[fold_f >= scored] = np.nan  # folds never held out: no honest probability
+    return {"auc": float(np.mean(aucs)), "auc_std": float(np.std(aucs)), "folds": folds, "scored_folds": scored,
             "repeats": repeats, "steps": steps, "aucs": aucs, "p_fake": p_fake}
 
 
@@ -98,9 +103,9 @@ def two_sample_markdown(result: dict, cfg: TwoSampleConfig) -> str:
              f"{cfg.max_steps} batches) on all folds but one "
              "and scores the held-out fold: ROC AUC 0.5 means it cannot tell the set from the real chips, "
              "1.0 that it always can (mean ± spread over folds and repeats).", "",
-             "| set | ROC AUC | folds × repeats |", "|---|---:|---|"]
-    lines += [f"| {name} | {m['auc']:.3f} ± {m['auc_std']:.3f} | {m['folds']} × {m['repeats']} |"
-              for name, m in result.items()]
+             "| set | ROC AUC | folds held out × repeats |", "|---|---:|---|"]
+    lines += [f"| {name} | {m['auc']:.3f} ± {m['auc_std']:.3f} | "
+              f"{m['scored_folds']} of {m['folds']} × {m['repeats']} |" for name, m in result.items()]
     lines += ["", f"Each set's chips the classifier finds most synthetic (p: held-out probability of being "
                   f"generated), each beside its nearest real chip in φ: ![most synthetic]({FIGURE})", ""]
     return "\n".join(lines + [signature_markdown({name: m["signature"] for name, m in result.items()})])

@@ -20,11 +20,15 @@ def test_two_draws_of_one_distribution_score_about_one_half():
     assert len(result["aucs"]) == 6 and result["p_fake"].shape == (120,)
 
 
-def test_large_sets_take_one_repeat_of_the_folds():
-    """From `one_repeat_from` chips on each side the folds alone pin the AUC: half the classifiers."""
-    cfg = TwoSampleConfig(folds=3, repeats=2, epochs=40, max_steps=20, size=32, one_repeat_from=50)
+def test_large_sets_hold_out_some_folds_of_one_repeat():
+    """From `large_from` chips on each side, held-out chips of a few folds pin the AUC: 2 classifiers, not 8.
+    Each still learns from 3/4 of the chips, and only the chips it never saw get a probability."""
+    cfg = TwoSampleConfig(folds=4, repeats=2, epochs=40, max_steps=20, size=32, large_from=50, large_scored_folds=2)
     small, large = (two_sample_auc(_speckle(n, 6.0, 0), _speckle(60, 6.0, 1), cfg) for n in (40, 60))
-    assert (small["repeats"], len(small["aucs"])) == (2, 6) and (large["repeats"], len(large["aucs"])) == (1, 3)
+    assert (small["repeats"], len(small["aucs"]), small["scored_folds"]) == (2, 8, 4)
+    assert not np.isnan(small["p_fake"]).any()
+    assert (large["repeats"], len(large["aucs"]), large["scored_folds"]) == (1, 2, 2)
+    assert np.isnan(large["p_fake"]).sum() == 30  # the 2 folds of 15 generated chips never held out
 
 
 def test_a_texture_the_real_chips_lack_is_found():
