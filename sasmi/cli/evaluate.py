@@ -33,7 +33,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
     p.add_argument("--no-two-sample", dest="two_sample", action="store_false",
                    help="skip the two-sample test (a classifier per set against the real chips, "
-                        "20-70 s per set on 2 cores) (default: run it)")
+                        "15-70 s per set on 2 cores) (default: run it)")
     p.add_argument("--device", default="auto", help="auto (CUDA when present), cpu, cuda or cuda:N")
     cache = p.add_mutually_exclusive_group()
     cache.add_argument("--cache", type=Path, metavar="DIR",
