@@ -194,8 +194,9 @@ def test_after_trains_the_very_same_generator(tmp_path):
     assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])
 
 
-def test_the_real_levels_recipe_is_small_data_with_donors_after():
-    """Two files that must not drift apart: the only difference is the donors' levels."""
+def test_the_real_levels_recipe_is_small_data_with_donors_after_and_a_coarser_correction():
+    """Two files that must not drift apart: the only differences are the donors' levels and the correction's scale."""
     small, real = load_recipe("small_data"), load_recipe("real_levels")
-    assert real.pop("generator") == replace(small.pop("generator"), donor_levels_after=True, donor_shadow=0.4)
+    assert real.pop("generator") == replace(small.pop("generator"), donor_levels_after=True, donor_shadow=0.4,
+                                            correction_scale=16)
     assert real == small
