@@ -149,12 +149,15 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float) -> di
 
 
 def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
-    """`score` with the φ-FID ratio of `sasmi evaluate` (matched sizes, 200 real splits): the report's figure."""
+    """`score` with the φ-FID ratio, precision and recall of `sasmi evaluate` (matched sizes): the report's figures."""
+    from sasmi.eval.manifold import precision_recall_matched
     from sasmi.eval.metrics import fid_ratio_matched
 
     s = score(images, real, encoder, cfg.phi_weight)
     ratio = fid_ratio_matched(s["features"], real.phi, 200, cfg.seed)
-    return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std}
+    precision, recall = precision_recall_matched(real.phi, s["features"], seed=cfg.seed)
+    return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
+            "recall": recall.value}
 
 
 def best_valid(study, preset: Preset, cfg: CalibrateConfig, final: CalibrateConfig) -> dict:

@@ -198,6 +198,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
     ratio = {n: f"{s['phi_ratio']:.2f} ± {s['phi_ratio_std']:.2f}" for n, (_, s) in shown.items()}
+    pr = {n: f"{s['precision']:.2f} / {s['recall']:.2f}" for n, (_, s) in shown.items()}
     lines = [
         f"# Calibration of {Path(record['start']).name} to {record['real']}", "",
         f"{len(study.trials)} trials in {searched_seconds(study) / 60:.1f} minutes of search ({cfg.sampler}, "
@@ -206,7 +207,8 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"Below, {cfg.final_chips} renders of scenes no trial rendered (seed {cfg.seed + 1}) against the "
         f"{len(real.phi)} real chips.", "",
         f"φ-FID ratio to the real chips (1 = as close as real chips to each other): start {ratio['start']}, "
-        f"calibrated {ratio['calibrated']}.", "",
+        f"calibrated {ratio['calibrated']}. Precision / recall in φ (recall: the share of real chips near some "
+        f"render; low when the renders are alike): start {pr['start']}, calibrated {pr['calibrated']}.", "",
         *statistics_table(real, shown), "",
         *refinement_lines(refinement),
         *sensitivity_lines(pins, best.params), "",

@@ -134,6 +134,7 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     report = (out / "report.md").read_text()
     assert "post.gain: 0.75 ->" in (out / "preset.toml").read_text()
     assert "25 trials" in report and (out / "sheet.png").is_file() and (out / "objective.png").is_file()
+    assert "Precision / recall in φ" in report
     pins = json.loads((out / "sensitivity.json").read_text())["post.gain"]
     # the gain moves the objective alone; 25 trials leave too few near the best to see whether others trade
     assert "| post.gain | 0.3" in report and pins["alone"] and pins["pinned"] is None
