@@ -4,9 +4,10 @@ cast by Mitsuba alone, and the render's scene update and launch, for the ratio; 
 time for the first of those scenes, as `sasmi crosscheck` traces it, beside it; the throughput
 of `sasmi render` itself in ms/chip with --workers 1 and 2 (the chips of a long run over the
 chips of a short one, so start-up and compilation cancel); and peak RSS of `sasmi render` for
---count 10 vs --count 1000 (memory must stay flat in the count).
+--count 10 vs --count 1000 (memory must stay flat in the count); and `sasmi generate`'s chips/s at 128²
+with the shipped files, timed the same way.
 
-    .venv/bin/python benchmarks/render.py [--images 24] [--workers 1 2] [--rss-counts 10 1000] [--no-povray]
+    .venv/bin/python benchmarks/render.py [--images 24] [--workers 1 2] [--rss-counts 10 1000] [--generate 50 350] [--no-povray]
 
 --avx2 times the in-process render with Dr.Jit's kernels compiled for AVX2 (8 float lanes) on an AVX-512
 machine: what the vector width alone costs a machine without AVX-512 (Embree, Mitsuba's ray tracer, keeps
@@ -134,18 +135,20 @@ def peak_rss_mb(count: int, size: int) -> tuple[float, float]:
     return kb / 1024, seconds
 
 
-def render_seconds(count: int, size: int, workers: int) -> float:
+def command_seconds(command: str, count: int, size: int, workers: int) -> float:
+    """Wall seconds of `sasmi COMMAND` (render, or generate with the shipped files) making `count` chips."""
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "sasmi", "render", str(PRESET), "--count", str(count), "--out",
+        subprocess.run([sys.executable, "-m", "sasmi", command, str(PRESET), "--count", str(count), "--out",
                         str(Path(tmp) / "set"), "--size", str(size), "--workers", str(workers)],
                        capture_output=True, text=True, check=True, cwd=REPO)
         return time.perf_counter() - start
 
 
-def throughput_ms(workers: int, size: int, short: int, long: int) -> float:
-    """ms per chip of `sasmi render --workers N`: (time of `long` chips - time of `short`) / (long - short)."""
-    return (render_seconds(long, size, workers) - render_seconds(short, size, workers)) / (long - short) * 1000
+def throughput_ms(command: str, workers: int, size: int, short: int, long: int) -> float:
+    """ms per chip of `sasmi COMMAND --workers N`: (time of `long` chips - time of `short`) / (long - short)."""
+    return (command_seconds(command, long, size, workers) - command_seconds(command, short, size, workers)) \
+        / (long - short) * 1000
 
 
 def compile_for_avx2() -> str:
@@ -191,6 +194,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="*", default=[1, 2], help="render processes to time sasmi render with")
     ap.add_argument("--chips", type=int, nargs=2, default=[16, 96], metavar=("SHORT", "LONG"),
                     help="the two run lengths whose difference is timed (default 16 96)")
+    ap.add_argument("--generate", type=int, nargs=2, default=[50, 350], metavar=("SHORT", "LONG"),
+                    help="the run lengths whose difference times `sasmi generate` at 128² with the shipped files, "
+                         "with each of --workers (default 50 350; 0 0 skips it)")
     ap.add_argument("--rss-counts", type=int, nargs="*", default=[10, 1000])
     ap.add_argument("--rss-size", type=int, default=256)
     ap.add_argument("--no-povray", action="store_true", help="skip the POV-Ray timing (no povray installed)")
@@ -218,9 +224,13 @@ def main() -> None:
               f"radiance only): {wall:.0f} ms wall, CPU {pov_cpu:.0f} ms; POV-Ray / Mitsuba: "
               f"{wall / statistics.median(times):.1f}x wall, {pov_cpu / statistics.median(cpu):.1f}x CPU")
     for workers in args.workers:
-        ms = throughput_ms(workers, args.size, *args.chips)
+        ms = throughput_ms("render", workers, args.size, *args.chips)
         print(f"sasmi render --size {args.size} --workers {workers}: {ms:.0f} ms/chip "
               f"(chips {args.chips[0]}..{args.chips[1]}, start-up excluded)")
+    for workers in args.workers if args.generate[1] > args.generate[0] else ():
+        ms = throughput_ms("generate", workers, 128, *args.generate)
+        print(f"sasmi generate --size 128 --workers {workers} (shipped generator, drawn floors): {1000 / ms:.1f} "
+              f"chips/s (chips {args.generate[0]}..{args.generate[1]}, start-up excluded)")
     for count in args.rss_counts:
         rss, seconds = peak_rss_mb(count, args.rss_size)
         print(f"sasmi render --count {count} --size {args.rss_size}: peak RSS {rss:.0f} MB, "
