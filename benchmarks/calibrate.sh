@@ -6,6 +6,8 @@
 #      beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves; 400 renders against the held-back floors of that sonar.
+#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1; 400 renders of the result
+#      against the validation targets beside cylinder_chip's own.
 #
 #     benchmarks/calibrate.sh [RUNS] [MINUTES] [SONAR]        (defaults: runs 30 sassed)
 set -eu
@@ -54,3 +56,10 @@ $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out 
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
 $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \
     --check || true
+
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
+    --out "$RUNS/calibrate-cylinder"
+$SASMI render "$RUNS/calibrate-cylinder/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-cylinder/renders"
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" "$RUNS/cylinder-renders" --check || true
+$SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-cylinder/evaluate" \
+    --set calibrated="$RUNS/calibrate-cylinder/renders" --set cylinder_chip="$RUNS/cylinder-renders"
