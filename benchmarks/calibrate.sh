@@ -6,8 +6,8 @@
 #      beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves; 400 renders against the held-back floors of that sonar.
-#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1; 400 renders of the result
-#      against the validation targets beside cylinder_chip's own.
+#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, without and with
+#      --variety-weight 1; 400 renders of each against the validation targets beside cylinder_chip's own.
 #
 #     benchmarks/calibrate.sh [RUNS] [MINUTES] [SONAR]        (defaults: runs 30 sassed)
 set -eu
@@ -59,7 +59,13 @@ $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/re
 
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
     --out "$RUNS/calibrate-cylinder"
-$SASMI render "$RUNS/calibrate-cylinder/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-cylinder/renders"
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" "$RUNS/cylinder-renders" --check || true
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
+    --variety-weight 1 --out "$RUNS/calibrate-cylinder-variety"
+for run in calibrate-cylinder calibrate-cylinder-variety; do
+    $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
+done
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" \
+    "$RUNS/calibrate-cylinder-variety/renders" "$RUNS/cylinder-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-cylinder/evaluate" \
-    --set calibrated="$RUNS/calibrate-cylinder/renders" --set cylinder_chip="$RUNS/cylinder-renders"
+    --set calibrated="$RUNS/calibrate-cylinder/renders" --set variety="$RUNS/calibrate-cylinder-variety/renders" \
+    --set cylinder_chip="$RUNS/cylinder-renders"

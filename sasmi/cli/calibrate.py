@@ -38,6 +38,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="local Dask processes scoring trials side by side (default: 1, here one after another)")
     p.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
                    help="score trials on this Dask cluster instead (the run folder needs no shared disk)")
+    p.add_argument("--variety-weight", type=float, default=d.variety_weight, metavar="W",
+                   help="weight of the real chips no render lies near in φ (recall's shortfall), which keeps the "
+                        f"renders as varied as the real chips (default: {d.variety_weight:g}, off; docs/calibrate.md)")
     p.add_argument("--phi", type=Path, metavar="RUN", help="φ autoencoder run or weights (default: the shipped φ)")
     p.add_argument("--seed", type=int, default=d.seed, help="preset draws of the trials (default: 0)")
     p.add_argument("--refine-steps", type=int, default=d.refine_steps,
@@ -52,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     params = DEFAULT_KNOBS if args.params == "default" else tuple(p.strip() for p in args.params.split(",") if p.strip())
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
-                          size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
+                          size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed, variety_weight=args.variety_weight,
                           workers=args.workers, scheduler=args.scheduler, refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")

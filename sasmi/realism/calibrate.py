@@ -5,14 +5,15 @@ candidate preset (the same random draws in every trial, so two trials differ by 
 scores them against the real chips:
 
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
+                + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
-d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1
-passes; the 4 target sizes, the share of chips with a target and the shadow level count only where
-most real chips show a target), and the φ-FID ratio is the
-renders' FID to the real chips in the shipped φ over that of as many real chips to the rest (1: as close as real chips are to each other). The first term pins what the
-statistics measure (shadow and highlight sizes in px, gray levels, speckle), the second the whole
-distribution of looks. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
-rerun continues it, and --minutes counts the search time of all runs together.
+d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes; the
+target sizes, the share of chips with a target and the shadow level count only where most real chips show a
+target); the φ-FID ratio is the renders' FID to the real chips in φ over that of as many real chips to the rest
+(1: as close as real chips are to each other). The first term pins what the statistics measure, the second the
+whole distribution of looks; the third (off by default: docs/calibrate.md) keeps them as varied as the real
+chips, which the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in
+RUN/study.db, so a rerun continues it; --minutes counts the search time of all runs together.
 """
 from __future__ import annotations
 
@@ -56,6 +57,7 @@ class CalibrateConfig:
     spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
+    variety_weight: float = 0.0  # weight of the recall shortfall: what keeps the renders as varied as the real chips
     final_chips: int = 200  # renders of the start and the calibrated preset in the report, other scenes
     seed: int = 0  # preset draws of the trials; the report's renders use seed + 1
     workers: int = 1  # local Dask processes scoring trials side by side (1: here, one after another)
@@ -69,6 +71,8 @@ class CalibrateConfig:
         check_size(self.size, "--size")
         if self.sampler not in SAMPLERS:
             raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
+        if self.variety_weight < 0:
+            raise SasmiError(f"--variety-weight: {self.variety_weight:g} (allowed: >= 0)")
         if self.refine_steps < 0:
             raise SasmiError(f"--refine-steps: {self.refine_steps} (allowed: >= 0)")
         if self.chips < 8 or self.final_chips < 8:
@@ -90,11 +94,13 @@ class RealChips:
     checked: tuple[str, ...]  # the statistics matched: the target ones only where most chips show a target
     phi: np.ndarray  # (N, D) float64
     phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
+    recall_reference: float  # share of the other real chips near `chips` real chips in φ, averaged over the same draws
     images: np.ndarray  # (N, S, S) float32 in [0, 1]
 
 
 def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 16) -> RealChips:
     from sasmi.eval.features import image_paths, load_images, phi_features
+    from sasmi.eval.manifold import precision_recall
     from sasmi.eval.metrics import fid
 
     stats = chip_statistics(folder, cfg.size)
@@ -104,14 +110,15 @@ def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 1
                          f"least {cfg.chips + 8}")
     phi = phi_features(encoder, images)
     rng = np.random.default_rng([cfg.seed, 7])
-    reference = []
+    reference, recall = [], []
     for _ in range(draws):
         order = rng.permutation(len(phi))
         reference.append(fid(phi[order[:cfg.chips]], phi[order[cfg.chips:]]))
+        recall.append(precision_recall(phi[order[cfg.chips:]], phi[order[:cfg.chips]])[1])
     targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
     checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
     values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
-    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), images)
+    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), float(np.mean(recall)), images)
 
 
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
@@ -133,9 +140,10 @@ def medians(images: np.ndarray) -> dict[str, float]:
     return out
 
 
-def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float) -> dict:
-    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio."""
+def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float = 0.0) -> dict:
+    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, recall."""
     from sasmi.eval.features import phi_features
+    from sasmi.eval.manifold import precision_recall
     from sasmi.eval.metrics import fid
 
     ours = medians(images)
@@ -143,9 +151,11 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float) -> di
     features = phi_features(encoder, images)
     ratio = fid(features, real.phi) / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
-    return {"objective": stats_term + phi_weight * ratio, "statistics": stats_term, "phi_ratio": ratio,
-            "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES), "distances": distances,
-            "medians": ours, "features": features}
+    recall = precision_recall(real.phi, features)[1]
+    shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
+    return {"objective": stats_term + phi_weight * ratio + variety_weight * shortfall, "statistics": stats_term,
+            "phi_ratio": ratio, "recall": recall, "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES),
+            "distances": distances, "medians": ours, "features": features}
 
 
 def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
@@ -153,7 +163,7 @@ def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConf
     from sasmi.eval.manifold import precision_recall_matched
     from sasmi.eval.metrics import fid_ratio_matched
 
-    s = score(images, real, encoder, cfg.phi_weight)
+    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight)
     ratio = fid_ratio_matched(s["features"], real.phi, 200, cfg.seed)
     precision, recall = precision_recall_matched(real.phi, s["features"], seed=cfg.seed)
     return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
@@ -201,8 +211,8 @@ def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: Calib
         images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
     except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
         return {"objective": FAILED, "invalid": str(e)}
-    s = score(images, real, encoder, cfg.phi_weight)
-    return {k: s[k] for k in ("objective", "statistics", "phi_ratio", "passed")}
+    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight)
+    return {k: s[k] for k in ("objective", "statistics", "phi_ratio", "recall", "passed")}
 
 
 @functools.lru_cache(maxsize=2)

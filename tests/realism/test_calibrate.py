@@ -15,7 +15,7 @@ from PIL import Image
 
 from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
-from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
+from sasmi.realism.calibrate import CalibrateConfig, calibrate, real_chips, render_chips, score
 from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, spread, start_values
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
 
@@ -125,6 +125,25 @@ def known(tmp_path_factory):
     return real, start
 
 
+def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_the_real_chips(known):
+    """New draws of the preset that made the real chips cost little; one draw repeated costs nearly the whole
+    weight (no real chip lies near it), on top of what the φ-FID ratio says."""
+    from sasmi.eval.features import as_encoder
+
+    real_folder, _ = known
+    cfg = CalibrateConfig(chips=16, size=64)
+    encoder = as_encoder(None)
+    real = real_chips(real_folder, cfg, encoder)
+    assert 0.3 < real.recall_reference < 1.0
+    truth = Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3")))
+    varied = render_chips(truth, 16, cfg, seed=9)
+    alike = np.repeat(varied[:1], 16, axis=0)
+    charge = {name: score(images, real, encoder, 1.0, 1.0)["objective"] - score(images, real, encoder, 1.0)["objective"]
+              for name, images in (("varied", varied), ("alike", alike))}
+    assert charge["alike"] > 0.8 and charge["varied"] < 0.4, charge
+    assert score(alike, real, encoder, 1.0)["recall"] < 0.2
+
+
 def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_path):
     real, start = known
     cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16)
@@ -211,7 +230,8 @@ def test_gradient_refinement_is_kept_only_where_it_lowers_the_objective(known, t
 def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
     real, start = known
     for args, words in ((["--params", "post.gian"], "unknown parameter post.gian"),
-                        (["--chips", "4"], "--chips"), (["--preset", str(tmp_path / "none.toml")], "not found")):
+                        (["--chips", "4"], "--chips"), (["--variety-weight", "-1"], "--variety-weight"),
+                        (["--preset", str(tmp_path / "none.toml")], "not found")):
         done = subprocess.run([sys.executable, "-m", "sasmi", "calibrate", "--real", str(real), "--out",
                                str(tmp_path / "run"), *args], capture_output=True, text=True)
         assert done.returncode == 2 and words in done.stderr and "Traceback" not in done.stderr, done.stderr
