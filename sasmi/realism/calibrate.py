@@ -154,8 +154,8 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, varie
     recall = precision_recall(real.phi, features)[1]
     shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
     return {"objective": stats_term + phi_weight * ratio + variety_weight * shortfall, "statistics": stats_term,
-            "phi_ratio": ratio, "recall": recall, "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES),
-            "distances": distances, "medians": ours, "features": features}
+            "phi_ratio": ratio, "recall": recall, "distances": distances, "medians": ours, "features": features,
+            "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES)}
 
 
 def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
