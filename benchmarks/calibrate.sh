@@ -1,9 +1,9 @@
 #!/bin/sh
 # The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
 # never saw.
-#   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split; 400
-#      renders of the result against the validation targets: `sasmi stats --check` and the φ-FID ratio
-#      beside 400 renders of the hand-matched cylinder_chip.
+#   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split, without
+#      and with --variety-weight 1; 400 renders of each result against the validation targets:
+#      `sasmi stats --check` and the φ-FID ratio beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves; 400 renders against the held-back floors of that sonar.
 #   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, without and with
@@ -24,14 +24,18 @@ post.speckle_cell_track,post.noise_std,post.gain.spread,seafloor.albedo.spread,s
 [ -d "$RUNS/split" ] || $SASMI split $DATA --seed 0 --out "$RUNS/split"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --out "$RUNS/calibrate-muscle"
-$SASMI render "$RUNS/calibrate-muscle/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-muscle/renders"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
+    --variety-weight 1 --out "$RUNS/calibrate-muscle-variety"
+for run in calibrate-muscle calibrate-muscle-variety; do
+    $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
+done
 $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
 $SASMI render muscle_paper --count 400 --size 128 --out "$RUNS/muscle-renders"
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/cylinder-renders" \
-    "$RUNS/muscle-renders" --check || true
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-variety/renders" \
+    "$RUNS/cylinder-renders" "$RUNS/muscle-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-muscle/evaluate" \
-    --set calibrated="$RUNS/calibrate-muscle/renders" --set cylinder_chip="$RUNS/cylinder-renders" \
-    --set muscle_paper="$RUNS/muscle-renders"
+    --set calibrated="$RUNS/calibrate-muscle/renders" --set variety="$RUNS/calibrate-muscle-variety/renders" \
+    --set cylinder_chip="$RUNS/cylinder-renders" --set muscle_paper="$RUNS/muscle-renders"
 
 # one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
 .venv/bin/python - "$DATA" "$RUNS/$SONAR" "$SONAR" <<'PY'

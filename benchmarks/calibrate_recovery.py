@@ -1,6 +1,6 @@
 """Does `sasmi calibrate` recover a known preset, and does its report say which knobs it cannot pin?
 
-    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20]
+    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32]
 
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
@@ -26,6 +26,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--minutes", type=float, default=20.0)
+    p.add_argument("--chips", type=int, default=32, help="renders a trial (calibrate's --chips)")
     args = p.parse_args()
 
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
@@ -41,7 +42,7 @@ def main() -> int:
     chips = args.out / "truth-chips"
     render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
                          size=128))
-    run = calibrate(chips / "images", START, CalibrateConfig(minutes=args.minutes), args.out / "calibrate")
+    run = calibrate(chips / "images", START, CalibrateConfig(minutes=args.minutes, chips=args.chips), args.out / "calibrate")
 
     pins = json.loads((run / "sensitivity.json").read_text())
     calibrated_raw = load_preset(run / "preset.toml").raw
