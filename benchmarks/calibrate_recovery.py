@@ -42,7 +42,8 @@ def main() -> int:
     chips = args.out / "truth-chips"
     render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
                          size=128))
-    run = calibrate(chips / "images", START, CalibrateConfig(minutes=args.minutes, chips=args.chips), args.out / "calibrate")
+    cfg = CalibrateConfig(minutes=args.minutes, chips=args.chips)
+    run = calibrate(chips / "images", START, cfg, args.out / "calibrate")
 
     pins = json.loads((run / "sensitivity.json").read_text())
     calibrated_raw = load_preset(run / "preset.toml").raw
