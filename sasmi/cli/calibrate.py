@@ -56,7 +56,8 @@ def run(args: argparse.Namespace) -> int:
     params = DEFAULT_KNOBS if args.params == "default" else tuple(p.strip() for p in args.params.split(",") if p.strip())
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
-                          variety_weight=args.variety_weight, workers=args.workers, scheduler=args.scheduler, refine_steps=args.refine_steps)
+                          variety_weight=args.variety_weight, workers=args.workers, scheduler=args.scheduler,
+                          refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")
     return 0
