@@ -2,7 +2,8 @@
 # The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
 # never saw.
 #   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split, without
-#      and with --variety-weight 1; 400 renders of each result against the validation targets:
+#      and with --variety-weight 1 (the latter, as 2 and 3, calibrating the search's best: --contenders 1);
+#      400 renders of each result against the validation targets:
 #      `sasmi stats --check` and the φ-FID ratio beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves; 400 renders against the held-back floors of that sonar.
@@ -25,7 +26,7 @@ post.speckle_cell_track,post.noise_std,post.gain.spread,seafloor.albedo.spread,s
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --out "$RUNS/calibrate-muscle"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
-    --variety-weight 1 --out "$RUNS/calibrate-muscle-variety"
+    --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
 for run in calibrate-muscle calibrate-muscle-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
@@ -55,16 +56,16 @@ print(f"{len(rows)} {sonar} chips in {out}")
 PY
 [ -d "$RUNS/$SONAR-split" ] || $SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
-    --chips 16 --minutes "$MINUTES" --out "$RUNS/calibrate-$SONAR"
+    --chips 16 --minutes "$MINUTES" --contenders 1 --out "$RUNS/calibrate-$SONAR"
 $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
 $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \
     --check || true
 
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
-    --out "$RUNS/calibrate-cylinder"
+    --contenders 1 --out "$RUNS/calibrate-cylinder"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
-    --variety-weight 1 --out "$RUNS/calibrate-cylinder-variety"
+    --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-cylinder-variety"
 for run in calibrate-cylinder calibrate-cylinder-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done

@@ -43,6 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         f"renders as varied as the real chips (default: {d.variety_weight:g}, off; docs/calibrate.md)")
     p.add_argument("--phi", type=Path, metavar="RUN", help="φ autoencoder run or weights (default: the shipped φ)")
     p.add_argument("--seed", type=int, default=d.seed, help="preset draws of the trials (default: 0)")
+    p.add_argument("--contenders", type=int, default=d.contenders, metavar="N",
+                   help="best trials on the search's scenes scored again on 4 other draws, the lowest calibrated "
+                        f"(default: {d.contenders}; 1: the search's best)")
     p.add_argument("--refine-steps", type=int, default=d.refine_steps,
                    help="then this many gradient steps (sasmi fit-scene) on relief, albedo and altitude, kept if they "
                         f"lower the objective (default: {d.refine_steps})")
@@ -57,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
                           variety_weight=args.variety_weight, workers=args.workers, scheduler=args.scheduler,
-                          refine_steps=args.refine_steps)
+                          contenders=args.contenders, refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")
     return 0

@@ -33,14 +33,15 @@ from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, imag
 from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
-from sasmi.realism.calibration_study import asked, full_disk_named, open_study, run_batch
+from sasmi.realism.calibration_study import asked, calibrated_trial, full_disk_named, open_study, run_batch
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
 
 SAMPLERS = ("cmaes", "tpe")
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
 FAILED = 1e3  # objective of a knob setting that makes no valid preset
-FRESH_DRAWS = 4  # other draws of the trials' scenes the calibrated preset is scored on: how well it really scores
+# other draws of the trials' scenes the calibrated trial is chosen on (and as many more its knobs are judged on)
+FRESH_DRAWS = 4
 OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
 ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
 # what the gradient refines: the differentiable render's parameters but the source level, which post.gain searches
@@ -62,6 +63,8 @@ class CalibrateConfig:
     seed: int = 0  # preset draws of the trials; the report's renders use seed + 1
     workers: int = 1  # local Dask processes scoring trials side by side (1: here, one after another)
     scheduler: str | None = None  # or an existing Dask cluster's address
+    # best trials on the search's scenes scored again on other draws, the lowest calibrated (1: the search's best)
+    contenders: int = 8
     # then this many steps of `sasmi fit-scene` (gradients through Mitsuba) from the calibrated preset on REFINED,
     # kept only where they lower the objective on the report's renders (the gradient sees φ, not the statistics)
     refine_steps: int = 0
@@ -73,6 +76,8 @@ class CalibrateConfig:
             raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
         if self.variety_weight < 0:
             raise SasmiError(f"--variety-weight: {self.variety_weight:g} (allowed: >= 0)")
+        if self.contenders < 1:
+            raise SasmiError(f"--contenders: {self.contenders} (allowed: >= 1)")
         if self.refine_steps < 0:
             raise SasmiError(f"--refine-steps: {self.refine_steps} (allowed: >= 0)")
         if self.chips < 8 or self.final_chips < 8:
@@ -84,7 +89,7 @@ class CalibrateConfig:
         """What a rerun must share to continue the study: everything but the budget, where trials run and what
         follows the search."""
         return {k: v for k, v in asdict(self).items()
-                if k not in ("minutes", "trials", "workers", "scheduler", "refine_steps")}
+                if k not in ("minutes", "trials", "workers", "scheduler", "contenders", "refine_steps")}
 
 
 @dataclass(frozen=True)
@@ -170,26 +175,6 @@ def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConf
             "recall": recall.value}
 
 
-def best_valid(study, preset: Preset, cfg: CalibrateConfig, final: CalibrateConfig) -> dict:
-    """The best trial's preset that also draws every scene of the report (and of `cfg.final_chips` more) within
-    the preset's rules: a trial saw only its own scenes, and a preset must hold for every draw."""
-    import optuna
-
-    done = sorted((t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE), key=lambda t: t.value)
-    for trial in done:
-        raw = apply(preset.raw, {n: trial.params[n] for n in cfg.params})
-        try:
-            candidate = Preset.from_dict(raw, path=preset.path)
-            for seed in (final.seed, final.seed + 1):
-                for i in range(cfg.final_chips):
-                    candidate.sample(seed, i)
-        except SasmiError:
-            continue
-        study.set_user_attr("calibrated_trial", trial.number)
-        return raw
-    raise SasmiError(f"no trial's preset draws {cfg.final_chips} valid scenes; rerun with a larger --minutes")
-
-
 def _check_record(out: Path, record: dict) -> None:
     path = out / "calibrate.json"
     if path.exists():
@@ -236,10 +221,11 @@ def _on_worker(raw: dict, preset_path: Path | None, real: RealChips, cfg: Calibr
 
 @contextlib.contextmanager
 def trial_runner(cfg: CalibrateConfig, preset: Preset, real: RealChips, encoder, phi) -> Iterator[tuple]:
-    """(run, width): run(raws) -> their scores, `width` trials at a time: here, or on a Dask cluster
+    """(run, width): run(raws[, seed]) -> their scores, `width` trials at a time: here, or on a Dask cluster
     (--scheduler, or --workers local processes, each with its share of the cores)."""
     if cfg.workers == 1 and not cfg.scheduler:
-        yield (lambda raws: [trial_score(raw, preset.path, real, cfg, encoder) for raw in raws]), 1
+        yield (lambda raws, seed=cfg.seed: [trial_score(raw, preset.path, real, replace(cfg, seed=seed), encoder)
+                                            for raw in raws]), 1
         return
     from sasmi.renderset.cluster import dask_client
     from sasmi.renderset.threads import local_threads
@@ -252,9 +238,9 @@ def trial_runner(cfg: CalibrateConfig, preset: Preset, real: RealChips, encoder,
         shared = client.scatter(light, broadcast=True, hash=False)
         path = None if phi is None else str(phi)
 
-        def run(raws: list[dict]) -> list[dict]:
-            return client.gather([client.submit(_on_worker, raw, preset.path, shared, cfg, path, threads, pure=False)
-                                  for raw in raws])
+        def run(raws: list[dict], seed: int = cfg.seed) -> list[dict]:
+            return client.gather([client.submit(_on_worker, raw, preset.path, shared, replace(cfg, seed=seed), path,
+                                                threads, pure=False) for raw in raws])
 
         yield run, max(1, sum(client.nthreads().values()))
 
@@ -306,13 +292,14 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                     run_batch(study, preset, cfg, x0, run, width_now)
             stop.restore()
             final = replace(cfg, seed=cfg.seed + 1)
-            best_raw = best_valid(study, preset, cfg, final)
-            best = study.trials[study.user_attrs["calibrated_trial"]]
-            fresh = [trial_score(best_raw, preset.path, real, replace(cfg, seed=cfg.seed + 2 + k),
-                                 encoder)["objective"] for k in range(FRESH_DRAWS)]  # scenes it was not fitted to
-            pins = trade_offs(sensitivity(best.params, lambda settings: [
-                s["objective"] for s in run([apply(preset.raw, values) for values in settings])]),
-                [(t.value, t.params) for t in study.trials if t.value is not None], best.params, best.value, fresh)
+
+            def objectives(settings: list[dict], seed: int = cfg.seed) -> list[float]:  # on the scenes of `seed`
+                return [s["objective"] for s in run([apply(preset.raw, values) for values in settings], seed)]
+            # other draws of the search's scenes: some to choose the calibrated trial, others to judge its knobs
+            draws = [cfg.seed + 2 + k for k in range(2 * FRESH_DRAWS)]
+            best_raw, best = calibrated_trial(study, preset, cfg, final, objectives, draws[:FRESH_DRAWS])
+            pins = trade_offs(sensitivity(best.params, objectives), [(t.value, t.params) for t in study.trials if t.value
+                              is not None], best.params, objectives, draws[FRESH_DRAWS:])
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)

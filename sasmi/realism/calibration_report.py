@@ -19,8 +19,7 @@ from sasmi.realism.preset_space import start_values
 SHOWN = 6  # chips per column of the sheet
 STEP = 0.2  # each knob is moved alone by this share of its search range (on its search scale), down and up ...
 RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average,
-SPAN = 0.15  # ... and every trial scoring as well as the calibrated preset holds it within this share of its value
-AS_GOOD = 10  # trials that good needed before their spread can show knobs that trade against each other
+SPAN = 0.15  # ... and the best trials holding it further than this share away score RISE worse on other draws
 
 
 def searched_seconds(study) -> float:
@@ -53,50 +52,98 @@ def sensitivity(best: dict[str, float], objectives_of) -> dict[str, dict]:
     return result
 
 
-def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], best_value: float,
-               fresh: list[float]) -> dict[str, dict]:
-    """`sensitivity`'s pins with what the search itself saw: each knob's range over the trials (objective,
-    knobs) that score as well as the calibrated preset (`best_value`) does on `fresh` draws of the search's
-    scene count, or on its own if that is worse. A search fits its own scenes' draws: the calibrated trial
-    mostly scores lower on them than on other draws, and within that spread no trial beats another. Knobs
-    that trade (gain against albedo, chip size against target size) each move the objective alone, yet
-    along their ridge other values score as well.
-    pinned: True where a knob moves the objective alone and every such trial holds it within SPAN of its
-    calibrated value, False where it does not, None where fewer than AS_GOOD trials are that good to tell."""
-    level = max(float(np.mean(fresh)), best_value)
-    good = [knobs for value, knobs in trials if value <= level * (1 + RISE)]
+def _beyond(name: str, best: float, trials: list[tuple[float, dict]]) -> dict[str, dict | str | None]:
+    """Below and above: the knobs of the trial scoring best on the search's scenes among those holding `name`
+    more than SPAN of `best` away on that side; "range" where the knob's range ends within SPAN, None where the
+    search tried nothing there."""
+    from sasmi.realism.preset_space import knob
+
+    k, band = knob(name), SPAN * abs(best)
+    found = {}
+    for side, beyond, ends in (("below", lambda x: x < best - band, best - band <= k.low),
+                               ("above", lambda x: x > best + band, best + band >= k.high)):
+        there = [(value, knobs) for value, knobs in trials if name in knobs and beyond(knobs[name])]
+        found[side] = min(there, key=lambda t: t[0])[1] if there else ("range" if ends else None)
+    return found
+
+
+def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], objectives_of,
+               draws: list[int]) -> dict[str, dict]:
+    """`sensitivity`'s pins with what the search itself saw. A search fits its own scenes' draws, so its scores
+    cannot tell two good trials apart: for each knob that moves the objective alone, the trials (objective,
+    knobs) scoring best with it more than SPAN below and above its calibrated value are scored again, beside
+    the calibrated preset, on other `draws` of the search's scenes (`objectives_of(settings, seed)`, as in
+    `sensitivity`, on the scenes of that seed; the same scenes for all, so the comparison is paired). Knobs that
+    trade (gain against albedo, chip size against target size) each move the objective alone, yet along their
+    ridge a value further away scores as well on those draws.
+    pinned: True where a knob moves the objective alone and both such trials score at least RISE worse on
+    average, by more than twice the rise's standard error over the draws (or the knob's range ends there);
+    False where one scores less than RISE worse; None where the draws cannot tell or the search tried nothing
+    that far on a side."""
+    beyond = {name: _beyond(name, best[name], trials) for name, p in pins.items() if p["alone"]}
+    settings = [best]
+    for knobs in (k for sides in beyond.values() for k in sides.values() if isinstance(k, dict)):
+        if knobs not in settings:
+            settings.append(knobs)
+    scores = np.array([objectives_of(settings, seed) for seed in draws], dtype=float)  # (draws, settings)
+    fresh = scores[:, 0]
+    level = float(np.mean(fresh))
     result = {}
     for name, p in pins.items():
-        values = [knobs[name] for knobs in good if name in knobs] or [best[name]]
-        low, high = float(min(values)), float(max(values))
-        held = bool(max(high - best[name], best[name] - low) <= SPAN * abs(best[name]))
-        pinned = (held if len(good) >= AS_GOOD else None) if p["alone"] else False
-        result[name] = {**p, "as_good": [low, high], "as_good_trials": len(good), "fresh": [float(f) for f in fresh],
-                        "pinned": pinned}
+        sides = {}
+        for side, knobs in beyond.get(name, {}).items():
+            if isinstance(knobs, dict):
+                d = (scores[:, settings.index(knobs)] - fresh) / level
+                error = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else 0.0
+                knobs = {"value": float(knobs[name]), "rise": float(np.mean(d)), "error": error}
+            sides[side] = knobs
+        found = [v for v in sides.values() if isinstance(v, dict)]
+        if not p["alone"] or any(v["rise"] < RISE for v in found):
+            pinned = False
+        elif None in sides.values() or any(v["rise"] < 2 * v["error"] for v in found):
+            pinned = None
+        else:
+            pinned = True
+        result[name] = {**p, "beyond": sides, "fresh": [float(f) for f in fresh], "pinned": pinned}
     return result
+
+
+def _side(found) -> str:
+    if found is None:
+        return "none tried"
+    if found == "range":
+        return "range ends"
+    return f"{_number(found['value'])}: {found['rise']:+.0%} ± {found['error']:.0%}"
 
 
 def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str]:
     loose = [n for n, p in pins.items() if not p["alone"]]
     traded = [n for n, p in pins.items() if p["alone"] and p["pinned"] is False]
-    count, fresh = (next(iter(pins.values()))[k] for k in ("as_good_trials", "fresh")) if pins else (0, [0.0])
-    verdict = {True: "yes", False: "**no**", None: "too few trials to tell"}
+    untried = [n for n, p in pins.items() if p["pinned"] is None]
+    fresh = next(iter(pins.values()))["fresh"] if pins else [0.0]
+    verdict = {True: "yes", False: "**no**", None: "cannot tell"}
     lines = [f"**What the chips pin.** Each knob moved alone by {STEP:.0%} of its search range, down and up, from "
              f"the calibrated preset (the search's scenes): the chips pin it alone when the objective rises by "
              f"{RISE:.0%} or more. " + (f"These they cannot pin, any value scoring alike: {', '.join(loose)}. "
                                         if loose else "They pin every knob alone. ")
-             + f"On {len(fresh)} other draws of the search's scenes the calibrated preset scores "
-               f"{np.mean(fresh):.3g} ± {np.std(fresh):.2g} (the search fits its own draws); {count} trials score "
-               f"within {RISE:.0%} of that, as well as it, and a knob is pinned when every one of them holds it within "
-               f"{SPAN:.0%} of its calibrated value. "
-             + (f"These move it alone, but values more than {SPAN:.0%} away score as well (they trade against other "
-                f"knobs, or the spread over scene draws hides them): {', '.join(traded)}. " if traded else "")
-             + (f"Fewer than {AS_GOOD} such trials cannot show which knobs trade: a longer search can. "
-                if count < AS_GOOD else ""), "",
-             "| knob | calibrated | moved to | objective rise | as good | pinned |", "|---|---|---|---|---|---|"]
-    lines += [f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
-              f"{p['share']:+.0%} | {_number(p['as_good'][0])} - {_number(p['as_good'][1])} | {verdict[p['pinned']]} |"
-              for n, p in pins.items()]
+             + f"A search fits its own scenes' draws: on {len(fresh)} other draws the calibrated preset scores "
+               f"{np.mean(fresh):.3g} ± {np.std(fresh):.2g}. For each knob that moves it alone, the trials that "
+               f"scored best with that knob more than {SPAN:.0%} below and above its calibrated value were scored "
+               f"on the same draws (*beyond*: the knob's value there and the objective's rise ± its standard "
+               f"error over the draws), and the knob is pinned when both score {RISE:.0%} or more worse, by more "
+               f"than twice that error. A yes speaks for the trials the search tried: a knob on a ridge it did not "
+               f"follow far (altitude with range and chip size) can still trade. "
+             + (f"These move it alone, but a value more than {SPAN:.0%} away scores as well (they trade against "
+                f"other knobs, or the spread over scene draws hides them): {', '.join(traded)}. " if traded else "")
+             + (f"These the draws cannot tell, or the search tried no value that far on a side: "
+                f"{', '.join(untried)}. " if untried else ""), "",
+             f"| knob | calibrated | moved to | objective rise | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned |",
+             "|---|---|---|---|---|---|---|"]
+    for n, p in pins.items():
+        sides = p.get("beyond", {})
+        below, above = (_side(sides[s]) if s in sides else "—" for s in ("below", "above"))
+        lines.append(f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
+                     f"{p['share']:+.0%} | {below} | {above} | {verdict[p['pinned']]} |")
     return lines
 
 
@@ -193,6 +240,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     import json
 
     best = study.trials[study.user_attrs["calibrated_trial"]]
+    draws, contenders = study.user_attrs["contenders"]["draws"], study.user_attrs["contenders"]["scores"]
     write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
     write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params, refinement))
     objective_figure(study, out / "objective.png")
@@ -202,8 +250,12 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     lines = [
         f"# Calibration of {Path(record['start']).name} to {record['real']}", "",
         f"{len(study.trials)} trials in {searched_seconds(study) / 60:.1f} minutes of search ({cfg.sampler}, "
-        f"{cfg.chips} renders of {cfg.size}² px per trial); best: trial {best.number}, objective "
-        f"{best.value:.3g} (start {study.trials[0].value:.3g}). Measured in φ: {record['phi']}.", "",
+        f"{cfg.chips} renders of {cfg.size}² px per trial); objective {study.trials[0].value:.3g} at the start, "
+        f"{study.best_value:.3g} at the best (trial {study.best_trial.number}). Calibrated: trial {best.number} "
+        f"({best.value:.3g}), of the {len(contenders)} best the one scoring lowest on {draws} other draws of "
+        f"the search's scenes ({min(c[2] for c in contenders):.3g}; the others "
+        f"{', '.join(f'{c[2]:.3g}' for c in contenders if c[0] != best.number) or 'none'}): a search's best owes "
+        f"part of its lead to the draws it was fitted to. Measured in φ: {record['phi']}.", "",
         f"Below, {cfg.final_chips} renders of scenes no trial rendered (seed {cfg.seed + 1}) against the "
         f"{len(real.phi)} real chips.", "",
         f"φ-FID ratio to the real chips (1 = as close as real chips to each other): start {ratio['start']}, "

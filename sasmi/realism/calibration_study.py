@@ -93,6 +93,37 @@ def run_batch(study, preset: Preset, cfg, x0: dict[str, float], run, width: int)
     study.set_user_attr("seconds", searched_seconds(study) + time.perf_counter() - start)
 
 
+def calibrated_trial(study, preset: Preset, cfg, final, objectives_of, draws: list[int]) -> tuple[dict, object]:
+    """(preset, trial): of the `cfg.contenders` best trials on the search's scenes whose presets draw every scene of the
+    report (and of `cfg.final_chips` more, seed `final.seed`) within the preset's rules, the one scoring lowest on
+    average over other `draws` of those scenes (`objectives_of(settings, seed)`). A search's best owes part of its
+    lead to the draws it was fitted to; a trial saw only its own scenes, and a preset must hold for every draw."""
+    import optuna
+
+    done = sorted((t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE), key=lambda t: t.value)
+    valid = []
+    for trial in done:
+        raw = apply(preset.raw, {n: trial.params[n] for n in cfg.params})
+        try:
+            candidate = Preset.from_dict(raw, path=preset.path)
+            for seed in (final.seed, final.seed + 1):
+                for i in range(cfg.final_chips):
+                    candidate.sample(seed, i)
+        except SasmiError:
+            continue
+        valid.append((raw, trial))
+        if len(valid) == cfg.contenders:
+            break
+    if not valid:
+        raise SasmiError(f"no trial's preset draws {cfg.final_chips} valid scenes; rerun with a larger --minutes")
+    scores = np.mean([objectives_of([t.params for _, t in valid], seed) for seed in draws], axis=0)
+    chosen = int(np.argmin(scores))
+    study.set_user_attr("calibrated_trial", valid[chosen][1].number)
+    study.set_user_attr("contenders", {"draws": len(draws),
+                                       "scores": [[t.number, t.value, float(v)] for (_, t), v in zip(valid, scores)]})
+    return valid[chosen]
+
+
 @contextlib.contextmanager
 def full_disk_named(out: Path) -> Iterator[None]:
     """SQLite's own words for a full disk, through SQLAlchemy, as one line naming the study."""
