@@ -298,8 +298,9 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             # other draws of the search's scenes: some to choose the calibrated trial, others to judge its knobs
             draws = [cfg.seed + 2 + k for k in range(2 * FRESH_DRAWS)]
             best_raw, best = calibrated_trial(study, preset, cfg, final, objectives, draws[:FRESH_DRAWS])
-            pins = trade_offs(sensitivity(best.params, objectives), [(t.value, t.params) for t in study.trials if t.value
-                              is not None], best.params, objectives, draws[FRESH_DRAWS:])
+            trials = [(t.value, t.params) for t in study.trials if t.value is not None]
+            pins = trade_offs(sensitivity(best.params, objectives), trials, best.params, objectives,
+                              draws[FRESH_DRAWS:])
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)

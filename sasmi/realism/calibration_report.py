@@ -91,12 +91,12 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     result = {}
     for name, p in pins.items():
         sides = {}
-        for side, knobs in beyond.get(name, {}).items():
-            if isinstance(knobs, dict):
-                d = (scores[:, settings.index(knobs)] - fresh) / level
+        for side, rival in beyond.get(name, {}).items():
+            if isinstance(rival, dict):
+                d = (scores[:, settings.index(rival)] - fresh) / level
                 error = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else 0.0
-                knobs = {"value": float(knobs[name]), "rise": float(np.mean(d)), "error": error}
-            sides[side] = knobs
+                rival = {"value": float(rival[name]), "rise": float(np.mean(d)), "error": error}
+            sides[side] = rival
         found = [v for v in sides.values() if isinstance(v, dict)]
         if not p["alone"] or any(v["rise"] < RISE for v in found):
             pinned = False
@@ -119,7 +119,7 @@ def _side(found) -> str:
 def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str]:
     loose = [n for n, p in pins.items() if not p["alone"]]
     traded = [n for n, p in pins.items() if p["alone"] and p["pinned"] is False]
-    untried = [n for n, p in pins.items() if p["pinned"] is None]
+    untold = [n for n, p in pins.items() if p["pinned"] is None]
     fresh = next(iter(pins.values()))["fresh"] if pins else [0.0]
     verdict = {True: "yes", False: "**no**", None: "cannot tell"}
     lines = [f"**What the chips pin.** Each knob moved alone by {STEP:.0%} of its search range, down and up, from "
@@ -136,7 +136,7 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str
              + (f"These move it alone, but a value more than {SPAN:.0%} away scores as well (they trade against "
                 f"other knobs, or the spread over scene draws hides them): {', '.join(traded)}. " if traded else "")
              + (f"These the draws cannot tell, or the search tried no value that far on a side: "
-                f"{', '.join(untried)}. " if untried else ""), "",
+                f"{', '.join(untold)}. " if untold else ""), "",
              f"| knob | calibrated | moved to | objective rise | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned |",
              "|---|---|---|---|---|---|---|"]
     for n, p in pins.items():
