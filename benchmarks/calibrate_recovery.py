@@ -1,12 +1,13 @@
 """Does `sasmi calibrate` recover a known preset, and does its report say which knobs it cannot pin?
 
-    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32]
+    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32] [--table-only]
 
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
 knob for --minutes, and the table compares each knob's calibrated value with the truth beside the
 report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best
-trials holding it more than 15 % away score worse on other draws). Rerunning continues the calibration.
+trials holding it more than 15 % away, and its profile there, score worse on other draws). Rerunning
+continues the calibration and writes its report again.
 """
 from __future__ import annotations
 
@@ -20,6 +21,12 @@ START = "cylinder_chip"
 TRUTH = {"sonar.chip_size": 30.0, "post.gain": 0.65, "post.speckle_looks": 4.0, "seafloor.rms_height": 0.03,
          "targets.size": 1.3}  # the start's: 24 m, 0.45, 6.5, 0.0175, 1
 RECOVERED = 0.15  # within this share of the truth
+# what the renders see of several knobs together: a target's size in pixels, the shadows' geometry in pixels,
+# the grazing angle at the near edge, the floor's brightness
+COMBINATIONS = {"target size : chip size": ("targets.size", "sonar.chip_size", -1),
+                "altitude : chip size": ("sonar.altitude", "sonar.chip_size", -1),
+                "altitude : near range": ("sonar.altitude", "sonar.near_range", -1),
+                "gain x albedo": ("post.gain", "seafloor.albedo", 1)}
 
 
 def main() -> int:
@@ -27,6 +34,7 @@ def main() -> int:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--minutes", type=float, default=20.0)
     p.add_argument("--chips", type=int, default=32, help="renders a trial (calibrate's --chips)")
+    p.add_argument("--table-only", action="store_true", help="print the tables of a finished run, calibrating no more")
     args = p.parse_args()
 
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
@@ -37,14 +45,15 @@ def main() -> int:
 
     start = load_preset(START)
     truth_raw = apply(start.raw, TRUTH)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "truth.toml").write_text(preset_toml(truth_raw))
-    chips = args.out / "truth-chips"
-    render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
-                         size=128))
-    cfg = CalibrateConfig(minutes=args.minutes, chips=args.chips)
-    run = calibrate(chips / "images", START, cfg, args.out / "calibrate")
-
+    chips, run = args.out / "truth-chips", args.out / "calibrate"
+    if not args.table_only:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "truth.toml").write_text(preset_toml(truth_raw))
+        render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
+                             size=128))
+        calibrate(chips / "images", START, CalibrateConfig(minutes=args.minutes, chips=args.chips), run)
+    elif not (run / "sensitivity.json").is_file():
+        sys.exit(f"{run}: no finished calibration; run without --table-only first")
     pins = json.loads((run / "sensitivity.json").read_text())
     calibrated_raw = load_preset(run / "preset.toml").raw
     truth, got, before = (start_values(raw, DEFAULT_KNOBS) for raw in (truth_raw, calibrated_raw, start.raw))
@@ -68,7 +77,11 @@ def main() -> int:
         print(f"| {name} | {before[name]:.4g} | {truth[name]:.4g} | {got[name]:.4g} | "
               f"{'—' if math.isinf(off) else f'{off:.0%}'} | {verdicts[pinned]} |")
     print(f"pinned knobs off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}; "
-          f"{len(untold)} knobs the report cannot tell")
+          f"{len(untold)} knobs the report cannot tell\n")
+    print("| knobs together | truth | calibrated | off by |\n|---|---|---|---|")
+    for label, (a, b, power) in COMBINATIONS.items():
+        t, g = (table[a] * table[b] ** power for table in (truth, got))
+        print(f"| {label} | {t:.4g} | {g:.4g} | {abs(g - t) / t:.0%} |")
     return 0
 
 

@@ -46,6 +46,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--contenders", type=int, default=d.contenders, metavar="N",
                    help="best trials on the search's scenes scored again on 4 other draws, the lowest calibrated "
                         f"(default: {d.contenders}; 1: the search's best)")
+    p.add_argument("--profile-trials", type=int, default=d.profile_trials, metavar="N",
+                   help="settings tried a side of each knob the search's trials leave pinned or undecided, the knob "
+                        "held 15 %% away and the others searched again "
+                        f"(default: {d.profile_trials}; 0: the search's trials alone)")
     p.add_argument("--refine-steps", type=int, default=d.refine_steps,
                    help="then this many gradient steps (sasmi fit-scene) on relief, albedo and altitude, kept if they "
                         f"lower the objective (default: {d.refine_steps})")
@@ -56,11 +60,13 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
     from sasmi.realism.preset_space import DEFAULT_KNOBS
 
-    params = DEFAULT_KNOBS if args.params == "default" else tuple(p.strip() for p in args.params.split(",") if p.strip())
+    named = tuple(p.strip() for p in args.params.split(",") if p.strip())
+    params = DEFAULT_KNOBS if args.params == "default" else named
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
                           variety_weight=args.variety_weight, workers=args.workers, scheduler=args.scheduler,
-                          contenders=args.contenders, refine_steps=args.refine_steps)
+                          contenders=args.contenders, profile_trials=args.profile_trials,
+                          refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")
     return 0

@@ -65,6 +65,8 @@ class CalibrateConfig:
     scheduler: str | None = None  # or an existing Dask cluster's address
     # best trials on the search's scenes scored again on other draws, the lowest calibrated (1: the search's best)
     contenders: int = 8
+    # settings tried a side of each knob the trials leave pinned or undecided, the knob held 15 % away: its profile
+    profile_trials: int = 17
     # then this many steps of `sasmi fit-scene` (gradients through Mitsuba) from the calibrated preset on REFINED,
     # kept only where they lower the objective on the report's renders (the gradient sees φ, not the statistics)
     refine_steps: int = 0
@@ -78,6 +80,8 @@ class CalibrateConfig:
             raise SasmiError(f"--variety-weight: {self.variety_weight:g} (allowed: >= 0)")
         if self.contenders < 1:
             raise SasmiError(f"--contenders: {self.contenders} (allowed: >= 1)")
+        if self.profile_trials < 0:
+            raise SasmiError(f"--profile-trials: {self.profile_trials} (allowed: >= 0)")
         if self.refine_steps < 0:
             raise SasmiError(f"--refine-steps: {self.refine_steps} (allowed: >= 0)")
         if self.chips < 8 or self.final_chips < 8:
@@ -89,7 +93,8 @@ class CalibrateConfig:
         """What a rerun must share to continue the study: everything but the budget, where trials run and what
         follows the search."""
         return {k: v for k, v in asdict(self).items()
-                if k not in ("minutes", "trials", "workers", "scheduler", "contenders", "refine_steps")}
+                if k not in ("minutes", "trials", "workers", "scheduler", "contenders", "profile_trials",
+                         "refine_steps")}
 
 
 @dataclass(frozen=True)
@@ -253,7 +258,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     from sasmi.eval.features import as_encoder, describe_phi
     from sasmi.gan.loop import StopSignals
     from sasmi.images import FolderLock
-    from sasmi.realism.calibration_report import searched_seconds, sensitivity, trade_offs, write_report
+    from sasmi.realism.calibration_pins import sensitivity, trade_offs
+    from sasmi.realism.calibration_report import searched_seconds, write_report
 
     cfg = cfg.validate()
     out = Path(out)
@@ -291,16 +297,21 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                     width_now = width if cfg.trials is None else min(width, cfg.trials - done)
                     run_batch(study, preset, cfg, x0, run, width_now)
             stop.restore()
+            bar.close()
             final = replace(cfg, seed=cfg.seed + 1)
+            judged = tqdm(unit="trial", desc="choose and judge the calibrated trial", disable=not progress or None)
 
             def objectives(settings: list[dict], seed: int = cfg.seed) -> list[float]:  # on the scenes of `seed`
-                return [s["objective"] for s in run([apply(preset.raw, values) for values in settings], seed)]
+                scores = run([apply(preset.raw, values) for values in settings], seed)
+                judged.update(len(settings))
+                return [s["objective"] for s in scores]
             # other draws of the search's scenes: some to choose the calibrated trial, others to judge its knobs
             draws = [cfg.seed + 2 + k for k in range(2 * FRESH_DRAWS)]
             best_raw, best = calibrated_trial(study, preset, cfg, final, objectives, draws[:FRESH_DRAWS])
             trials = [(t.value, t.params) for t in study.trials if t.value is not None]
             pins = trade_offs(sensitivity(best.params, objectives), trials, best.params, objectives,
-                              draws[FRESH_DRAWS:])
+                              draws[FRESH_DRAWS:], cfg.profile_trials, cfg.seed)
+            judged.close()
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)

@@ -14,12 +14,10 @@ import numpy as np
 from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
 from sasmi.chips.stats import STATISTICS
 from sasmi.images import write_text
+from sasmi.realism.calibration_pins import RISE, SPAN, STEP
 from sasmi.realism.preset_space import start_values
 
 SHOWN = 6  # chips per column of the sheet
-STEP = 0.2  # each knob is moved alone by this share of its search range (on its search scale), down and up ...
-RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average,
-SPAN = 0.15  # ... and the best trials holding it further than this share away score RISE worse on other draws
 
 
 def searched_seconds(study) -> float:
@@ -31,92 +29,16 @@ def _number(v: float) -> str:
     return "—" if not math.isfinite(v) else f"{v:.3g}"
 
 
-def sensitivity(best: dict[str, float], objectives_of) -> dict[str, dict]:
-    """Per knob, the calibrated objective's mean rise with that knob alone moved STEP of its range down and up
-    (clipped to the range); objectives_of(settings) scores a list of settings of every knob at once (on the
-    trials' workers). A knob whose moves leave the objective where it was is one the chips cannot pin."""
-    from sasmi.realism.preset_space import knob
-
-    moves = {}
-    for name, value in best.items():
-        k = knob(name)
-        to, back = (math.log, math.exp) if k.log else (float, float)
-        width = STEP * (to(k.high) - to(k.low))
-        moves[name] = [min(max(back(to(max(value, k.low)) + sign * width), k.low), k.high) for sign in (-1, 1)]
-    base, *moved = objectives_of([best, *({**best, name: m} for name in moves for m in moves[name])])
-    result = {}
-    for i, name in enumerate(moves):
-        rise = float(np.mean(moved[2 * i:2 * i + 2]) - base)
-        result[name] = {"moved": moves[name], "rise": rise, "share": rise / max(base, 1e-12),
-                        "alone": rise >= RISE * base}
-    return result
-
-
-def _beyond(name: str, best: float, trials: list[tuple[float, dict]]) -> dict[str, dict | str | None]:
-    """Below and above: the knobs of the trial scoring best on the search's scenes among those holding `name`
-    more than SPAN of `best` away on that side; "range" where the knob's range ends within SPAN, None where the
-    search tried nothing there."""
-    from sasmi.realism.preset_space import knob
-
-    k, band = knob(name), SPAN * abs(best)
-    found = {}
-    for side, beyond, ends in (("below", lambda x: x < best - band, best - band <= k.low),
-                               ("above", lambda x: x > best + band, best + band >= k.high)):
-        there = [(value, knobs) for value, knobs in trials if name in knobs and beyond(knobs[name])]
-        found[side] = min(there, key=lambda t: t[0])[1] if there else ("range" if ends else None)
-    return found
-
-
-def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], objectives_of,
-               draws: list[int]) -> dict[str, dict]:
-    """`sensitivity`'s pins with what the search itself saw. A search fits its own scenes' draws, so its scores
-    cannot tell two good trials apart: for each knob that moves the objective alone, the trials (objective,
-    knobs) scoring best with it more than SPAN below and above its calibrated value are scored again, beside
-    the calibrated preset, on other `draws` of the search's scenes (`objectives_of(settings, seed)`, as in
-    `sensitivity`, on the scenes of that seed; the same scenes for all, so the comparison is paired). Knobs that
-    trade (gain against albedo, chip size against target size) each move the objective alone, yet along their
-    ridge a value further away scores as well on those draws.
-    pinned: True where a knob moves the objective alone and both such trials score at least RISE worse on
-    average, by more than twice the rise's standard error over the draws (or the knob's range ends there);
-    False where one scores less than RISE worse; None where the draws cannot tell or the search tried nothing
-    that far on a side."""
-    beyond = {name: _beyond(name, best[name], trials) for name, p in pins.items() if p["alone"]}
-    settings = [best]
-    for knobs in (k for sides in beyond.values() for k in sides.values() if isinstance(k, dict)):
-        if knobs not in settings:
-            settings.append(knobs)
-    scores = np.array([objectives_of(settings, seed) for seed in draws], dtype=float)  # (draws, settings)
-    fresh = scores[:, 0]
-    level = float(np.mean(fresh))
-    result = {}
-    for name, p in pins.items():
-        sides = {}
-        for side, rival in beyond.get(name, {}).items():
-            if isinstance(rival, dict):
-                d = (scores[:, settings.index(rival)] - fresh) / level
-                error = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else 0.0
-                rival = {"value": float(rival[name]), "rise": float(np.mean(d)), "error": error}
-            sides[side] = rival
-        found = [v for v in sides.values() if isinstance(v, dict)]
-        if not p["alone"] or any(v["rise"] < RISE for v in found):
-            pinned = False
-        elif None in sides.values() or any(v["rise"] < 2 * v["error"] for v in found):
-            pinned = None
-        else:
-            pinned = True
-        result[name] = {**p, "beyond": sides, "fresh": [float(f) for f in fresh], "pinned": pinned}
-    return result
-
-
 def _side(found) -> str:
     if found is None:
         return "none tried"
     if found == "range":
         return "range ends"
-    return f"{_number(found['value'])}: {found['rise']:+.0%} ± {found['error']:.0%}"
+    profiled = " (profile)" if found.get("profiled") else ""
+    return f"{_number(found['value'])}{profiled}: {found['rise']:+.0%} ± {found['error']:.0%}"
 
 
-def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str]:
+def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_budget: int = 0) -> list[str]:
     loose = [n for n, p in pins.items() if not p["alone"]]
     traded = [n for n, p in pins.items() if p["alone"] and p["pinned"] is False]
     untold = [n for n, p in pins.items() if p["pinned"] is None]
@@ -131,11 +53,17 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float]) -> list[str
                f"scored best with that knob more than {SPAN:.0%} below and above its calibrated value were scored "
                f"on the same draws (*beyond*: the knob's value there and the objective's rise ± its standard "
                f"error over the draws), and the knob is pinned when both score {RISE:.0%} or more worse, by more "
-               f"than twice that error. A yes speaks for the trials the search tried: a knob on a ridge it did not "
-               f"follow far (altitude with range and chip size) can still trade. "
+               f"than twice that error. "
+             + (f"The search may not have followed a ridge (altitude with range, gain with albedo) that far, so "
+                f"each side those trials left pinned or undecided was also profiled: the knob held {SPAN:.0%} away "
+                f"and the other knobs searched again ({profile_budget} settings a side, CMA-ES from the line the "
+                f"best trials lie along), the lower of the two rises counting (*(profile)*). A yes speaks for "
+                f"the settings tried. " if profile_budget else
+                "A yes speaks for the trials the search tried: a knob on a ridge it did not follow far (altitude "
+                "with range and chip size) can still trade. ")
              + (f"These move it alone, but a value more than {SPAN:.0%} away scores as well (they trade against "
                 f"other knobs, or the spread over scene draws hides them): {', '.join(traded)}. " if traded else "")
-             + (f"These the draws cannot tell, or the search tried no value that far on a side: "
+             + (f"These the draws cannot tell, or nothing was tried that far on a side: "
                 f"{', '.join(untold)}. " if untold else ""), "",
              f"| knob | calibrated | moved to | objective rise | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned |",
              "|---|---|---|---|---|---|---|"]
@@ -263,7 +191,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"render; low when the renders are alike): start {pr['start']}, calibrated {pr['calibrated']}.", "",
         *statistics_table(real, shown), "",
         *refinement_lines(refinement),
-        *sensitivity_lines(pins, best.params), "",
+        *sensitivity_lines(pins, best.params, cfg.profile_trials), "",
         "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
         "search: `objective.png`.", "",
         "![sheet](sheet.png)", "", "![objective](objective.png)", "",

@@ -231,7 +231,7 @@ def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
     real, start = known
     for args, words in ((["--params", "post.gian"], "unknown parameter post.gian"),
                         (["--chips", "4"], "--chips"), (["--variety-weight", "-1"], "--variety-weight"),
-                        (["--contenders", "0"], "--contenders"),
+                        (["--contenders", "0"], "--contenders"), (["--profile-trials", "-1"], "--profile-trials"),
                         (["--preset", str(tmp_path / "none.toml")], "not found")):
         done = subprocess.run([sys.executable, "-m", "sasmi", "calibrate", "--real", str(real), "--out",
                                str(tmp_path / "run"), *args], capture_output=True, text=True)
@@ -272,7 +272,7 @@ def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
     # the knob moves of the report were scored on the workers too, as here
     from sasmi.eval.features import as_encoder
     from sasmi.realism.calibrate import apply, real_chips, trial_score
-    from sasmi.realism.calibration_report import sensitivity
+    from sasmi.realism.calibration_pins import sensitivity
 
     preset, encoder = load_preset(start), as_encoder(None)
     chips = real_chips(real, cfg, encoder)
@@ -281,106 +281,6 @@ def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
                                                            encoder)["objective"] for v in settings])
     there = json.loads((out / "sensitivity.json").read_text())
     assert there["post.gain"]["rise"] == pytest.approx(here["post.gain"]["rise"], rel=1e-6)
-
-
-def _on_draws(objective, shift=lambda seed: 0.0):
-    """objectives_of(settings, seed): `objective` of each setting, plus what the draw of `seed` adds to all."""
-    return lambda settings, seed=0: [objective(v) + shift(seed) for v in settings]
-
-
-def test_the_report_tells_a_pinned_knob_from_one_the_chips_cannot_pin():
-    from sasmi.realism.calibration_report import sensitivity, sensitivity_lines, trade_offs
-
-    calls = []
-
-    def objectives(settings, seed=0):  # sees the gain alone: every noise level scores alike
-        calls.append(settings)
-        return [1.0 + 20 * math.log(values["post.gain"] / 0.3) ** 2 for values in settings]
-
-    best = {"post.gain": 0.3, "post.noise_std": 0.05}
-    pins = sensitivity(best, objectives)
-    assert len(calls) == 1 and len(calls[0]) == 5  # one batch for the trials' workers ...
-    assert calls[0][0] == best  # ... the calibrated setting, then each knob alone down and up
-    assert pins["post.gain"]["alone"] and pins["post.gain"]["rise"] > 0.5
-    assert pins["post.gain"]["moved"][0] < 0.3 < pins["post.gain"]["moved"][1]
-    assert not pins["post.noise_std"]["alone"] and pins["post.noise_std"]["rise"] == 0.0
-    assert pins["post.noise_std"]["moved"] == [pytest.approx(0.03), pytest.approx(0.07)]  # 20 % of its 0-0.1 range
-    trials = [(1.0 + 20 * math.log(g / 0.3) ** 2, {"post.gain": g, "post.noise_std": n})
-              for g, n in zip(np.linspace(0.2, 0.4, 21), np.linspace(0.0, 0.1, 21))]
-    pins = trade_offs(pins, trials, best, objectives, [2, 3])
-    gain = pins["post.gain"]
-    assert gain["pinned"] is True and pins["post.noise_std"]["pinned"] is False
-    # the nearest trials beyond 15 %, the best of each side, scored again: 20 x log(0.25 / 0.3)² = +66 %
-    assert gain["beyond"]["below"]["value"] == pytest.approx(0.25) and gain["beyond"]["below"]["rise"] > 0.6
-    assert gain["beyond"]["above"]["value"] == pytest.approx(0.35) and gain["fresh"] == [1.0, 1.0]
-    # the calibrated setting and gain's two, on each of the two draws: a knob the chips cannot pin alone is not
-    assert len(calls) == 3 and [len(c) for c in calls[1:]] == [3, 3] and calls[1][0] == best
-    lines = "\n".join(sensitivity_lines(pins, best))
-    assert "cannot pin, any value scoring alike: post.noise_std." in lines and "| 0.25: +66% ± 0% |" in lines
-
-
-def test_knobs_that_trade_along_a_ridge_are_not_called_pinned():
-    """Gain and albedo each move the objective alone, but only their product is seen: the best trials the search
-    found along the ridge beyond 15 % score as well on other draws; the looks, seen alone, stay pinned."""
-    from sasmi.realism.calibration_report import sensitivity, sensitivity_lines, trade_offs
-
-    def objective(v):
-        seen = v["post.gain"] * v["seafloor.albedo"]
-        return 1.0 + 4 * math.log(seen / 0.1) ** 2 + math.log(v["post.speckle_looks"] / 5) ** 2
-
-    best = {"post.gain": 0.25, "seafloor.albedo": 0.4, "post.speckle_looks": 5.0}
-    pins = sensitivity(best, _on_draws(objective))
-    assert all(p["alone"] for p in pins.values())
-    rng = np.random.default_rng(0)
-    gains = np.exp(rng.uniform(math.log(0.15), math.log(0.45), 60))  # the search's samples along the ridge
-    trials = [(objective(v), v) for v in ({"post.gain": g, "seafloor.albedo": 0.1 / g * math.exp(rng.normal(0, 0.03)),
-                                           "post.speckle_looks": 5.0 * math.exp(rng.normal(0, 0.03))} for g in gains)]
-    trials += [(objective(v), v) for v in ({**best, "post.speckle_looks": looks} for looks in (2.0, 3.0, 8.0, 12.0))]
-    # the other draws add the same to every setting: the comparison is paired, so a noisy draw hides nothing
-    traded = trade_offs(pins, [(objective(best), best), *trials], best, _on_draws(objective, lambda s: 0.3 * s),
-                        [1, 2, 3, 4])
-    assert traded["post.gain"]["pinned"] is False and traded["seafloor.albedo"]["pinned"] is False
-    assert traded["post.gain"]["beyond"]["above"]["rise"] < 0.05
-    assert traded["post.speckle_looks"]["pinned"] is True
-    assert [traded["post.speckle_looks"]["beyond"][s]["value"] for s in ("below", "above")] == [3.0, 8.0]
-    assert "the spread over scene draws hides them): post.gain, seafloor.albedo." in \
-        "\n".join(sensitivity_lines(traded, best))
-    few = trade_offs(pins, [(objective(best), best)], best, _on_draws(objective), [1])  # a search too short
-    assert {p["pinned"] for p in few.values()} == {None}
-    assert "| cannot tell |" in "\n".join(sensitivity_lines(few, best))
-
-
-def test_a_value_that_scored_as_well_on_the_search_scenes_alone_does_not_unpin_a_knob():
-    """The search's scenes flattered looks of 6.5 (0.62 against the best's 0.6): on other draws it scores
-    worse, so the looks stay pinned; where other draws score it as well, they are not."""
-    from sasmi.realism.calibration_report import trade_offs
-
-    pins = {"post.speckle_looks": {"alone": True}}
-    best = {"post.speckle_looks": 5.0}
-    trials = [(0.6, best), (0.62, {"post.speckle_looks": 6.5}), (0.9, {"post.speckle_looks": 7.0}),
-              (0.7, {"post.speckle_looks": 4.0}), (0.95, {"post.speckle_looks": 2.0})]
-    sharp = _on_draws(lambda v: 1.0 + 10 * math.log(v["post.speckle_looks"] / 5) ** 2)
-    judged = trade_offs(pins, trials, best, sharp, [2, 3])["post.speckle_looks"]
-    assert judged["pinned"] is True and judged["beyond"]["above"]["value"] == 6.5
-    assert judged["beyond"]["below"]["value"] == 4.0 and judged["fresh"] == [1.0, 1.0]
-    flat = _on_draws(lambda v: 1.0 + 0.1 * math.log(v["post.speckle_looks"] / 5) ** 2)
-    assert trade_offs(pins, trials, best, flat, [2, 3])["post.speckle_looks"]["pinned"] is False
-    # 15 % worse on average, but by 5 % on one draw and 25 % on the other: the two draws cannot tell
-    def uneven(settings, seed):
-        return [1.0 + (0.15 + (0.1 if seed == 3 else -0.1)) * (v != best) for v in settings]
-
-    unsure = trade_offs(pins, trials, best, uneven, [2, 3])["post.speckle_looks"]
-    assert unsure["beyond"]["above"]["rise"] == pytest.approx(0.15)
-    assert unsure["beyond"]["above"]["error"] == pytest.approx(0.1) and unsure["pinned"] is None
-    even = _on_draws(lambda v: 1.0 + 0.15 * (v != best))
-    assert trade_offs(pins, trials, best, even, [2, 3])["post.speckle_looks"]["pinned"] is True
-    # at its range's end, a side with nothing beyond counts as held
-    low = knob("post.speckle_looks").low
-    edge = trade_offs(pins, [(0.6, {"post.speckle_looks": low}), (0.7, {"post.speckle_looks": 2 * low})],
-                      {"post.speckle_looks": low},
-                      _on_draws(lambda v: 1.0 + 10 * math.log(v["post.speckle_looks"] / low) ** 2), [2])
-    edge = edge["post.speckle_looks"]
-    assert edge["beyond"]["below"] == "range" and edge["pinned"] is True
 
 
 def test_the_calibrated_trial_is_the_contender_scoring_best_on_other_draws(known):

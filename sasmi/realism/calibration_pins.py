@@ -1,0 +1,185 @@
+"""Which knobs the chips pin: what `sasmi calibrate`'s report says of each calibrated value.
+
+A knob is pinned when moving it alone raises the objective (`sensitivity`) and no setting holding it more
+than SPAN away scores as well on other draws of the search's scenes (`trade_offs`). The rivals are the
+search's own best trials beyond SPAN and, where those leave a knob pinned or undecided, a profile: the knob
+held SPAN away and every other knob searched again from the ridge the best trials lie along.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sasmi.realism.preset_space import knob
+
+STEP = 0.2  # each knob is moved alone by this share of its search range (on its search scale), down and up ...
+RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at least this share, on average,
+SPAN = 0.15  # ... and the best settings holding it further than this share away score RISE worse on other draws
+SIGMA = 0.05  # the profile's CMA-ES step, as a share of each knob's search range: a local search from the ridge
+POPULATION = 8  # the profile's settings a generation
+
+
+def _unit(name: str):
+    """(to, back): a knob's value to its place in its search range (0 to 1, log where searched so) and back."""
+    k = knob(name)
+    to, back = (math.log, math.exp) if k.log else (float, float)
+    low, high = to(k.low), to(k.high)
+    return (lambda x: (to(min(max(x, k.low), k.high)) - low) / (high - low),
+            lambda u: min(max(back(low + min(max(u, 0.0), 1.0) * (high - low)), k.low), k.high))
+
+
+def sensitivity(best: dict[str, float], objectives_of) -> dict[str, dict]:
+    """Per knob, the calibrated objective's mean rise with that knob alone moved STEP of its range down and up
+    (clipped to the range); objectives_of(settings) scores a list of settings of every knob at once (on the
+    trials' workers). A knob whose moves leave the objective where it was is one the chips cannot pin."""
+    moves = {}
+    for name, value in best.items():
+        to, back = _unit(name)
+        moves[name] = [back(to(value) + sign * STEP) for sign in (-1, 1)]
+    base, *moved = objectives_of([best, *({**best, name: m} for name in moves for m in moves[name])])
+    result = {}
+    for i, name in enumerate(moves):
+        rise = float(np.mean(moved[2 * i:2 * i + 2]) - base)
+        result[name] = {"moved": moves[name], "rise": rise, "share": rise / max(base, 1e-12),
+                        "alone": rise >= RISE * base}
+    return result
+
+
+def _beyond(name: str, best: float, trials: list[tuple[float, dict]]) -> dict[str, dict | str | None]:
+    """Below and above: the knobs of the trial scoring best on the search's scenes among those holding `name`
+    more than SPAN of `best` away on that side; "range" where the knob's range ends within SPAN, None where the
+    search tried nothing there."""
+    k, band = knob(name), SPAN * abs(best)
+    found = {}
+    for side, beyond, ends in (("below", lambda x: x < best - band, best - band <= k.low),
+                               ("above", lambda x: x > best + band, best + band >= k.high)):
+        there = [(value, knobs) for value, knobs in trials if name in knobs and beyond(knobs[name])]
+        found[side] = min(there, key=lambda t: t[0])[1] if there else ("range" if ends else None)
+    return found
+
+
+def ridge(name: str, best: dict[str, float], trials: list[tuple[float, dict]]) -> dict[str, float]:
+    """Per knob, how far it moves along its search range per unit of `name`'s among the best tenth of the trials
+    (at least twice as many as knobs): the line along which knobs trade, which CMA-ES's last generations
+    follow. 0 where those trials hold `name` fixed."""
+    names = list(best)
+    done = sorted((t for t in trials if all(n in t[1] for n in names)), key=lambda t: t[0])
+    top = done[:max(2 * len(names) + 1, len(done) // 10)]
+    if len(top) < 3:
+        return {n: 0.0 for n in names}
+    u = np.array([[_unit(n)[0](knobs[n]) for n in names] for _, knobs in top])
+    held = u[:, names.index(name)]
+    if held.var() < 1e-12:
+        return {n: 0.0 for n in names}
+    return {n: float(np.cov(held, u[:, j])[0, 1] / held.var(ddof=1)) for j, n in enumerate(names)}
+
+
+def profile(wanted: list[tuple[str, str]], best: dict[str, float], trials: list[tuple[float, dict]],
+            objectives_of, budget: int, seed: int, searched: list[str] | None = None) -> dict[tuple[str, str], dict]:
+    """Per (knob, side) in `wanted`, the setting scoring best on the search's scenes with the knob held SPAN below
+    or above its calibrated value: the first on the ridge (`ridge`) through the calibrated preset, then CMA-ES
+    generations from there over the other knobs (those `searched`, default all: the ones that move the objective
+    are what can make up for the held one), `budget` settings a side in all, all sides scored together."""
+    import cmaes
+
+    names = list(best)
+    found, searches = {}, {}
+    for key in wanted:
+        name, side = key
+        to, back = _unit(name)
+        held = best[name] * (1 - SPAN if side == "below" else 1 + SPAN)
+        moved = to(held) - to(best[name])
+        slopes = ridge(name, best, trials)
+        found[key] = {n: held if n == name else _unit(n)[1](_unit(n)[0](best[n]) + slopes[n] * moved) for n in names}
+    if not found:
+        return {}
+    scores = dict(zip(found, objectives_of(list(found.values()))))
+    for i, (name, side) in enumerate(found):
+        free = [n for n in (names if searched is None else searched) if n != name]
+        if free and budget > 1:
+            state = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+            mean = np.array([_unit(n)[0](found[name, side][n]) for n in free])
+            searches[name, side] = (free, cmaes.CMA(mean=mean, sigma=SIGMA, bounds=np.array([[0.0, 1.0]] * len(free)),
+                                                    seed=state, population_size=POPULATION))
+    for _ in range((budget - 1) // POPULATION if searches else 0):
+        asked = [(key, u, {**found[key], **{n: _unit(n)[1](x) for n, x in zip(free, u)}})
+                 for key, (free, cma) in searches.items() for u in (cma.ask() for _ in range(POPULATION))]
+        values = objectives_of([setting for _, _, setting in asked])
+        for key, (_, cma) in searches.items():
+            cma.tell([(u, v) for (k, u, _), v in zip(asked, values) if k == key])
+        for (key, _, setting), value in zip(asked, values):
+            if value < scores[key]:
+                scores[key], found[key] = value, setting
+    return found
+
+
+def _rises(settings: list[dict], objectives_of, draws: list[int]) -> tuple[np.ndarray, list[tuple[float, float]]]:
+    """The first setting's objective on each of `draws`, and each setting's mean rise over it (as a share of its
+    mean) with the standard error over the draws: the same scenes for all, so the comparison is paired."""
+    scores = np.array([objectives_of(settings, seed) for seed in draws], dtype=float)  # (draws, settings)
+    fresh = scores[:, 0]
+    rises = []
+    for j in range(len(settings)):
+        d = (scores[:, j] - fresh) / float(np.mean(fresh))
+        rises.append((float(np.mean(d)), float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else 0.0))
+    return fresh, rises
+
+
+def _pinned(alone: bool, sides: dict) -> bool | None:
+    found = [v for v in sides.values() if isinstance(v, dict)]
+    if not alone or any(v["rise"] < RISE for v in found):
+        return False
+    if None in sides.values() or any(v["rise"] < 2 * v["error"] for v in found):
+        return None
+    return True
+
+
+def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], objectives_of,
+               draws: list[int], profile_budget: int = 0, seed: int = 0) -> dict[str, dict]:
+    """`sensitivity`'s pins with what a search can see. A search fits its own scenes' draws, so its scores cannot
+    tell two good settings apart: for each knob that moves the objective alone, the trials (objective, knobs)
+    scoring best with it more than SPAN below and above its calibrated value are scored again, beside the
+    calibrated preset, on other `draws` of the search's scenes (`objectives_of(settings, seed)`, as in
+    `sensitivity`, on the scenes of that seed). Knobs that trade (gain against albedo, altitude against range)
+    each move the objective alone, yet along their ridge a value further away scores as well. The search's
+    trials may not reach along a ridge: with `profile_budget`, each side of a knob they leave pinned or
+    undecided is profiled too (`profile`, that many settings a side) and the lower of the two rises counts.
+    pinned: True where a knob moves the objective alone and both sides score at least RISE worse on average,
+    by more than twice the rise's standard error over the draws (or the knob's range ends there); False where
+    one scores less than RISE worse; None where the draws cannot tell or nothing was scored that far on a side."""
+    result = {name: {**p, "beyond": {}} for name, p in pins.items()}
+    trialled = {}
+    for name, p in pins.items():
+        for side, rival in (_beyond(name, best[name], trials) if p["alone"] else {}).items():
+            result[name]["beyond"][side] = None if isinstance(rival, dict) else rival  # None till scored
+            if isinstance(rival, dict):
+                trialled[name, side] = rival
+    fresh = _judge(result, trialled, best, objectives_of, draws, profiled=False)
+    wanted = [(name, side) for name, r in result.items() if r["alone"] and _pinned(True, r["beyond"]) is not False
+              for side, rival in r["beyond"].items() if rival != "range" and best[name] != 0]
+    if profile_budget and wanted:
+        moving = [name for name, p in pins.items() if p["alone"]]
+        _judge(result, profile(wanted, best, trials, objectives_of, profile_budget, seed, moving), best,
+               objectives_of, draws, profiled=True)
+    for r in result.values():
+        r.update(fresh=[float(f) for f in fresh], pinned=_pinned(r["alone"], r["beyond"]))
+    return result
+
+
+def _judge(result: dict, rivals: dict[tuple[str, str], dict], best: dict[str, float], objectives_of,
+           draws: list[int], profiled: bool) -> np.ndarray:
+    """Score `rivals` ((knob, side) -> setting) beside `best` on `draws`; each becomes its side's rival in `result`
+    where it rises less than the one there. The calibrated preset's scores on the draws."""
+    settings = [best]
+    for rival in rivals.values():
+        if rival not in settings:
+            settings.append(rival)
+    fresh, rises = _rises(settings, objectives_of, draws)
+    for (name, side), rival in rivals.items():
+        rise, error = rises[settings.index(rival)]
+        old = result[name]["beyond"][side]
+        if not isinstance(old, dict) or rise < old["rise"]:
+            result[name]["beyond"][side] = {"value": float(rival[name]), "rise": rise, "error": error,
+                                            "profiled": profiled}
+    return fresh
