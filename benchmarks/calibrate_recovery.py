@@ -1,6 +1,7 @@
 """Does `sasmi calibrate` recover a known preset, and does its report say which knobs it cannot pin?
 
-    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32] [--table-only]
+    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32] [--profile-trials N]
+                                                [--table-only]
 
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
@@ -15,6 +16,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 START = "cylinder_chip"
@@ -34,6 +36,7 @@ def main() -> int:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--minutes", type=float, default=20.0)
     p.add_argument("--chips", type=int, default=32, help="renders a trial (calibrate's --chips)")
+    p.add_argument("--profile-trials", type=int, help="calibrate's --profile-trials (default: its default)")
     p.add_argument("--table-only", action="store_true", help="print the tables of a finished run, calibrating no more")
     args = p.parse_args()
 
@@ -51,7 +54,10 @@ def main() -> int:
         (args.out / "truth.toml").write_text(preset_toml(truth_raw))
         render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
                              size=128))
-        calibrate(chips / "images", START, CalibrateConfig(minutes=args.minutes, chips=args.chips), run)
+        cfg = CalibrateConfig(minutes=args.minutes, chips=args.chips)
+        if args.profile_trials is not None:
+            cfg = replace(cfg, profile_trials=args.profile_trials)
+        calibrate(chips / "images", START, cfg, run)
     elif not (run / "sensitivity.json").is_file():
         sys.exit(f"{run}: no finished calibration; run without --table-only first")
     pins = json.loads((run / "sensitivity.json").read_text())
