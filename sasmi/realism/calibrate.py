@@ -66,7 +66,7 @@ class CalibrateConfig:
     # best trials on the search's scenes scored again on other draws, the lowest calibrated (1: the search's best)
     contenders: int = 8
     # settings tried a side of each knob the trials leave pinned or undecided, the knob held 15 % away: its profile
-    profile_trials: int = 17
+    profile_trials: int = 9  # the line's point and one CMA-ES generation
     # then this many steps of `sasmi fit-scene` (gradients through Mitsuba) from the calibrated preset on REFINED,
     # kept only where they lower the objective on the report's renders (the gradient sees φ, not the statistics)
     refine_steps: int = 0
