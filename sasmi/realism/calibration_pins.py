@@ -84,14 +84,14 @@ def profile(wanted: list[tuple[str, str]], best: dict[str, float], trials: list[
     import cmaes
 
     names = list(best)
+    slopes = {name: ridge(name, best, trials) for name in dict.fromkeys(n for n, _ in wanted)}  # one line, both sides
     found, searches = {}, {}
-    for key in wanted:
-        name, side = key
-        to, back = _unit(name)
+    for name, side in wanted:
+        to = _unit(name)[0]
         held = best[name] * (1 - SPAN if side == "below" else 1 + SPAN)
         moved = to(held) - to(best[name])
-        slopes = ridge(name, best, trials)
-        found[key] = {n: held if n == name else _unit(n)[1](_unit(n)[0](best[n]) + slopes[n] * moved) for n in names}
+        found[name, side] = {n: held if n == name else _unit(n)[1](_unit(n)[0](best[n]) + slopes[name][n] * moved)
+                             for n in names}
     if not found:
         return {}
     scores = dict(zip(found, objectives_of(list(found.values()))))
