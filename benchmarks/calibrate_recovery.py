@@ -1,14 +1,16 @@
 """Does `sasmi calibrate` recover a known preset, and does its report say which knobs it cannot pin?
 
-    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32] [--profile-trials N]
-                                                [--table-only]
+    python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32]
+                                            [--profile-trials N] [--table-only]
 
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
 knob for --minutes, and the table compares each knob's calibrated value with the truth beside the
 report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best
-trials holding it more than 15 % away, and its profile there, score worse on other draws). Rerunning
-continues the calibration and writes its report again.
+trials holding it more than 15 % away, and its profile there, score worse on other draws). A second table
+takes the knobs the renders see together (COMBINATIONS) and whether the report's *moves with* names each
+pair, rising together for a ratio and falling for a product. Rerunning continues the calibration and
+writes its report again.
 """
 from __future__ import annotations
 
@@ -84,10 +86,18 @@ def main() -> int:
               f"{'—' if math.isinf(off) else f'{off:.0%}'} | {verdicts[pinned]} |")
     print(f"pinned knobs off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}; "
           f"{len(untold)} knobs the report cannot tell\n")
-    print("| knobs together | truth | calibrated | off by |\n|---|---|---|---|")
+    # a ratio the renders see makes its knobs rise together along the objective's ridge, a product one fall as
+    # the other rises: the report's *moves with* should name the pair with that sign
+    print("| knobs together | truth | calibrated | off by | report: moves with |\n|---|---|---|---|---|")
+    named = 0
     for label, (a, b, power) in COMBINATIONS.items():
         t, g = (table[a] * table[b] ** power for table in (truth, got))
-        print(f"| {label} | {t:.4g} | {g:.4g} | {abs(g - t) / t:.0%} |")
+        r = dict(pins[a].get("moves_with", [])).get(b)
+        right = r is not None and (r > 0) == (power < 0)
+        named += right
+        seen = "not named" if r is None else f"{r:+.2f}{'' if right else ' (the wrong way)'}"
+        print(f"| {label} | {t:.4g} | {g:.4g} | {abs(g - t) / t:.0%} | {seen} |")
+    print(f"pairs the report names as moving together, the way the renders see them: {named} of {len(COMBINATIONS)}")
     return 0
 
 

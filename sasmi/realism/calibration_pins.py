@@ -3,7 +3,8 @@
 A knob is pinned when moving it alone raises the objective (`sensitivity`) and no setting holding it more
 than SPAN away scores as well on other draws of the search's scenes (`trade_offs`). The rivals are the
 search's own best trials beyond SPAN and, where those leave a knob pinned or undecided, a profile: the knob
-held SPAN away and every other knob searched again from the ridge the best trials lie along.
+held SPAN away and every other knob searched again from the ridge the best trials lie along. What a knob that
+trades trades with shows in the best trials, spread along the ridge (`moves_with`).
 """
 from __future__ import annotations
 
@@ -18,6 +19,9 @@ RISE = 0.1  # ... and the chips pin it when the calibrated objective rises by at
 SPAN = 0.15  # ... and the best settings holding it further than this share away score RISE worse on other draws
 SIGMA = 0.05  # the profile's CMA-ES step, as a share of each knob's search range: a local search from the ridge
 POPULATION = 8  # the profile's settings a generation
+PARTNER = 0.5  # a knob moves with another where they correlate at least this much among the best trials ...
+SURE = 3.5  # ... and the correlation's Fisher z is this many standard errors from 0: chance, over 14 knobs' 91
+# pairs, names one pair in 20 runs
 
 
 def _unit(name: str):
@@ -59,20 +63,47 @@ def _beyond(name: str, best: float, trials: list[tuple[float, dict]]) -> dict[st
     return found
 
 
-def ridge(name: str, best: dict[str, float], trials: list[tuple[float, dict]]) -> dict[str, float]:
-    """Per knob, how far it moves along its search range per unit of `name`'s among the best tenth of the trials
-    (at least twice as many as knobs): the line along which knobs trade, which CMA-ES's last generations
-    follow. 0 where those trials hold `name` fixed."""
-    names = list(best)
+def best_tenth(names: list[str], trials: list[tuple[float, dict]]) -> list[tuple[float, dict]]:
+    """The best tenth of the trials (objective, knobs) that set every knob of `names`, at least twice as many as
+    knobs: the trials that spread along the objective's ridges."""
     done = sorted((t for t in trials if all(n in t[1] for n in names)), key=lambda t: t[0])
-    top = done[:max(2 * len(names) + 1, len(done) // 10)]
-    if len(top) < 3:
-        return {n: 0.0 for n in names}
-    u = np.array([[_unit(n)[0](knobs[n]) for n in names] for _, knobs in top])
-    held = u[:, names.index(name)]
-    if held.var() < 1e-12:
+    return done[:max(2 * len(names) + 1, len(done) // 10)]
+
+
+def _best_units(names: list[str], trials: list[tuple[float, dict]]) -> np.ndarray | None:
+    """(trials, knobs) `best_tenth` in search-range units, `names` in order; None with fewer than 3."""
+    top = best_tenth(names, trials)
+    return np.array([[_unit(n)[0](knobs[n]) for n in names] for _, knobs in top]) if len(top) >= 3 else None
+
+
+def ridge(name: str, best: dict[str, float], trials: list[tuple[float, dict]]) -> dict[str, float]:
+    """Per knob, how far it moves along its search range per unit of `name`'s among the best tenth of the trials:
+    the line along which knobs trade, which CMA-ES's last generations follow. 0 where those trials hold `name`
+    fixed."""
+    names = list(best)
+    u = _best_units(names, trials)
+    held = None if u is None else u[:, names.index(name)]
+    if held is None or held.var() < 1e-12:
         return {n: 0.0 for n in names}
     return {n: float(np.cov(held, u[:, j])[0, 1] / held.var(ddof=1)) for j, n in enumerate(names)}
+
+
+def moves_with(moving: list[str], trials: list[tuple[float, dict]]) -> dict[str, list[tuple[str, float]]]:
+    """Per knob of `moving`, the others of `moving` it rises or falls with among the best tenth of the trials
+    (correlation at least PARTNER either way, on their search scales, and SURE standard errors from none), the
+    strongest first: where the objective is flat along a line, CMA-ES's best trials spread along it, so a knob
+    that trades shows what it trades with (gain falling as albedo rises, altitude rising with range)."""
+    u = _best_units(moving, trials)
+    if u is None:
+        return {n: [] for n in moving}
+    spread = u.std(axis=0)
+    kept = spread > 1e-9
+    r = np.zeros((len(moving), len(moving)))
+    r[np.ix_(kept, kept)] = np.corrcoef(u[:, kept], rowvar=False)
+    least = max(PARTNER, math.tanh(SURE / math.sqrt(max(len(u) - 3, 1))))
+    return {n: sorted(((m, float(r[i, j])) for j, m in enumerate(moving) if j != i and abs(r[i, j]) >= least),
+                      key=lambda pair: -abs(pair[1]))
+            for i, n in enumerate(moving)}
 
 
 def profile(wanted: list[tuple[str, str]], best: dict[str, float], trials: list[tuple[float, dict]],
@@ -162,8 +193,10 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
         moving = [name for name, p in pins.items() if p["alone"]]
         _judge(result, profile(wanted, best, trials, objectives_of, profile_budget, seed, moving), best,
                objectives_of, draws, profiled=True)
-    for r in result.values():
-        r.update(fresh=[float(f) for f in fresh], pinned=_pinned(r["alone"], r["beyond"]))
+    partners = moves_with([name for name, p in pins.items() if p["alone"]], trials)
+    for name, r in result.items():
+        r.update(fresh=[float(f) for f in fresh], pinned=_pinned(r["alone"], r["beyond"]),
+                 moves_with=partners.get(name, []))
     return result
 
 

@@ -14,10 +14,12 @@ import numpy as np
 from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
 from sasmi.chips.stats import STATISTICS
 from sasmi.images import write_text
-from sasmi.realism.calibration_pins import RISE, SPAN, STEP
-from sasmi.realism.preset_space import start_values
+from sasmi.realism.calibration_pins import PARTNER, RISE, SPAN, STEP, best_tenth
+from sasmi.realism.preset_space import knob, start_values
 
 SHOWN = 6  # chips per column of the sheet
+PARTNERS = 3  # knobs named in a row's *moves with*
+RIDGES = 6  # pairs of knobs drawn in ridges.png, the most correlated first
 
 
 def searched_seconds(study) -> float:
@@ -64,14 +66,20 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_bud
              + (f"These move it alone, but a value more than {SPAN:.0%} away scores as well (they trade against "
                 f"other knobs, or the spread over scene draws hides them): {', '.join(traded)}. " if traded else "")
              + (f"These the draws cannot tell, or nothing was tried that far on a side: "
-                f"{', '.join(untold)}. " if untold else ""), "",
-             f"| knob | calibrated | moved to | objective rise | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned |",
-             "|---|---|---|---|---|---|---|"]
+                f"{', '.join(untold)}. " if untold else "")
+             + f"*Moves with*: the knobs moving the objective alone that rise (+) or fall (−) with this one among "
+               f"the best tenth of the trials (correlation {PARTNER:g} or more either way, the strongest {PARTNERS}): "
+               f"along such a line the objective is flat, so what a knob trades with, the chips pin together.",
+             "",
+             f"| knob | calibrated | moved to | objective rise | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned "
+             f"| moves with |",
+             "|---|---|---|---|---|---|---|---|"]
     for n, p in pins.items():
         sides = p.get("beyond", {})
         below, above = (_side(sides[s]) if s in sides else "—" for s in ("below", "above"))
+        partners = ", ".join(f"{m} ({r:+.2f})" for m, r in p.get("moves_with", [])[:PARTNERS]) or "—"
         lines.append(f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
-                     f"{p['share']:+.0%} | {below} | {above} | {verdict[p['pinned']]} |")
+                     f"{p['share']:+.0%} | {below} | {above} | {verdict[p['pinned']]} | {partners} |")
     return lines
 
 
@@ -141,6 +149,43 @@ def objective_figure(study, path: Path) -> None:
     save_figure(fig, path)
 
 
+def ridge_pairs(pins: dict[str, dict]) -> list[tuple[str, str, float]]:
+    """(knob, knob, correlation) of each pair one of them *moves with*, the strongest first, at most RIDGES."""
+    pairs = {tuple(sorted((name, other))): r for name, p in pins.items() for other, r in p.get("moves_with", [])}
+    return sorted(((a, b, r) for (a, b), r in pairs.items()), key=lambda pair: -abs(pair[2]))[:RIDGES]
+
+
+def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float],
+                  path: Path) -> bool:
+    """Each pair of knobs that move together: every trial, the best tenth and the calibrated preset, on the
+    search scales. False (and no file) where no pair moves together."""
+    from matplotlib.figure import Figure
+
+    from sasmi.eval.report import save_figure
+
+    pairs = ridge_pairs(pins)
+    if not pairs:
+        return False
+    top = best_tenth(list({n for a, b, _ in pairs for n in (a, b)}), trials)
+    fig = Figure(figsize=(3.2 * min(len(pairs), 3), 3.0 * math.ceil(len(pairs) / 3)))
+    axes = np.atleast_1d(fig.subplots(math.ceil(len(pairs) / 3), min(len(pairs), 3))).ravel()
+    for ax, (a, b, r) in zip(axes, pairs):
+        for shown, style in ((trials, dict(s=4, color="0.75", label="trial")),
+                             (top, dict(s=8, color="C0", label="best tenth"))):
+            points = np.array([(knobs[a], knobs[b]) for _, knobs in shown if a in knobs and b in knobs])
+            if len(points):
+                ax.scatter(points[:, 0], points[:, 1], **style)
+        ax.scatter([best[a]], [best[b]], marker="*", s=120, color="C3", label="calibrated")
+        ax.set(xlabel=a, ylabel=b, title=f"correlation {r:+.2f}", xscale="log" if knob(a).log else "linear",
+               yscale="log" if knob(b).log else "linear")
+    axes[0].legend(fontsize=7)
+    for ax in axes[len(pairs):]:
+        ax.axis("off")
+    fig.tight_layout()
+    save_figure(fig, path)
+    return True
+
+
 def sheet_figure(real, shown: dict, path: Path) -> None:
     from matplotlib.figure import Figure
 
@@ -173,6 +218,10 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params, refinement))
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
+    trials = [(t.value, t.params) for t in study.trials if t.value is not None]
+    ridges = ridges_figure(pins, trials, best.params, out / "ridges.png")
+    if not ridges:  # a rerun's report: no figure of pairs this run does not find
+        (out / "ridges.png").unlink(missing_ok=True)
     ratio = {n: f"{s['phi_ratio']:.2f} ± {s['phi_ratio_std']:.2f}" for n, (_, s) in shown.items()}
     pr = {n: f"{s['precision']:.2f} / {s['recall']:.2f}" for n, (_, s) in shown.items()}
     lines = [
@@ -193,7 +242,9 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         *refinement_lines(refinement),
         *sensitivity_lines(pins, best.params, cfg.profile_trials), "",
         "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
-        "search: `objective.png`.", "",
+        "search: `objective.png`." + (" The knobs that move together, trial by trial: `ridges.png`." if ridges
+                                      else ""), "",
         "![sheet](sheet.png)", "", "![objective](objective.png)", "",
+        *(["![ridges](ridges.png)", ""] if ridges else []),
     ]
     write_text(out / "report.md", "\n".join(lines))

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from sasmi.realism.calibration_pins import RISE, profile, ridge, sensitivity, trade_offs
-from sasmi.realism.calibration_report import sensitivity_lines
+from sasmi.realism.calibration_pins import RISE, moves_with, profile, ridge, sensitivity, trade_offs
+from sasmi.realism.calibration_report import ridge_pairs, ridges_figure, sensitivity_lines
 from sasmi.realism.preset_space import knob
 
 
@@ -70,8 +70,12 @@ def test_knobs_that_trade_along_a_ridge_are_not_called_pinned():
     assert traded["post.gain"]["beyond"]["above"]["rise"] < 0.05
     assert traded["post.speckle_looks"]["pinned"] is True
     assert [traded["post.speckle_looks"]["beyond"][s]["value"] for s in ("below", "above")] == [3.0, 8.0]
-    assert "the spread over scene draws hides them): post.gain, seafloor.albedo." in \
-        "\n".join(sensitivity_lines(traded, best))
+    lines = "\n".join(sensitivity_lines(traded, best))
+    assert "the spread over scene draws hides them): post.gain, seafloor.albedo." in lines
+    # what they trade with: each other, falling as the other rises
+    assert [m for m, _ in traded["post.gain"]["moves_with"]] == ["seafloor.albedo"]
+    assert traded["post.gain"]["moves_with"][0][1] < -0.9 and traded["post.speckle_looks"]["moves_with"] == []
+    assert "| **no** | seafloor.albedo (-1.00) |" in lines
     few = trade_offs(pins, [(objective(best), best)], best, _on_draws(objective), [1])  # a search too short
     assert {p["pinned"] for p in few.values()} == {None}
     assert "| cannot tell |" in "\n".join(sensitivity_lines(few, best))
@@ -136,6 +140,28 @@ def test_the_ridge_is_the_line_the_best_trials_lie_along():
     assert ridge("post.gain", BEST, trials[:2])["seafloor.albedo"] == 0.0  # too few trials to draw a line
 
 
+def test_a_knob_moves_with_those_its_best_trials_rise_or_fall_with_and_no_others():
+    """The best trials lie along gain x albedo = 0.1, with altitude rising with the near range (the grazing angle
+    seen); the looks wander on their own; worse trials off both lines are not among the best tenth."""
+    rng = np.random.default_rng(2)
+    names = ["post.gain", "seafloor.albedo", "sonar.altitude", "sonar.near_range", "post.speckle_looks"]
+    trials = []
+    for g, a in zip(np.exp(rng.uniform(math.log(0.2), math.log(0.3), 60)), rng.uniform(5.0, 8.0, 60)):
+        knobs = {"post.gain": g, "seafloor.albedo": 0.1 / g * math.exp(rng.normal(0, 0.02)), "sonar.altitude": a,
+                 "sonar.near_range": 5 * a * math.exp(rng.normal(0, 0.02)),
+                 "post.speckle_looks": 5.0 * math.exp(rng.normal(0, 0.2))}
+        trials.append((1.0 + rng.uniform(0, 0.01), knobs))
+    trials += [(5.0, {**trials[0][1], "seafloor.albedo": 0.4 * albedo}) for albedo in rng.uniform(0.5, 2.0, 300)]
+    partners = moves_with(names, trials)
+    assert [m for m, _ in partners["post.gain"]] == ["seafloor.albedo"] and partners["post.gain"][0][1] < -0.95
+    assert [m for m, _ in partners["sonar.near_range"]] == ["sonar.altitude"]
+    assert partners["sonar.near_range"][0][1] > 0.95 and partners["post.speckle_looks"] == []
+    # a knob the best trials hold fixed moves with nothing, and nothing with it
+    still = moves_with(names, [(v, {**knobs, "post.gain": 0.25}) for v, knobs in trials])
+    assert still["post.gain"] == [] and all(m != "post.gain" for p in still.values() for m, _ in p)
+    assert moves_with(names, trials[:2]) == {n: [] for n in names}  # too few trials to tell
+
+
 def test_a_ridge_the_search_did_not_follow_is_profiled_and_the_knobs_on_it_are_not_called_pinned():
     """The search tried gain 30 % away only with albedo where it was (scoring worse), and its best trials lie along
     gain x albedo = 0.1 within 10 %: its trials alone call gain pinned; holding gain 15 % away and following the
@@ -181,3 +207,18 @@ def test_the_profile_searches_the_other_knobs_where_the_trials_show_no_ridge():
                     searched=["post.speckle_looks"])
     assert alone["post.gain", "above"]["seafloor.albedo"] == pytest.approx(BEST["seafloor.albedo"])
     assert objective(alone["post.gain", "above"]) - 1.0 == pytest.approx(on_line)
+
+
+def test_each_pair_of_knobs_that_move_together_is_drawn_once(tmp_path):
+    pins = {"post.gain": {"moves_with": [("seafloor.albedo", -0.97), ("post.speckle_looks", 0.6)]},
+            "seafloor.albedo": {"moves_with": [("post.gain", -0.97)]},
+            "post.speckle_looks": {"moves_with": [("post.gain", 0.6)]}}
+    assert ridge_pairs(pins) == [("post.gain", "seafloor.albedo", -0.97), ("post.gain", "post.speckle_looks", 0.6)]
+    rng = np.random.default_rng(3)
+    trials = [(1.0 + rng.uniform(0, 0.1), {**BEST, "post.gain": g, "seafloor.albedo": 0.1 / g})
+              for g in rng.uniform(0.2, 0.3, 50)]
+    assert ridges_figure(pins, trials, BEST, tmp_path / "ridges.png")
+    assert (tmp_path / "ridges.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    alone = {name: {"moves_with": []} for name in BEST}
+    assert ridge_pairs(alone) == [] and not ridges_figure(alone, trials, BEST, tmp_path / "none.png")
+    assert not (tmp_path / "none.png").exists()
