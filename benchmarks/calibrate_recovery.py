@@ -8,9 +8,10 @@ stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, s
 knob for --minutes, and the table compares each knob's calibrated value with the truth beside the
 report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best
 trials holding it more than 15 % away, and its profile there, score worse on other draws). A second table
-takes the knobs the renders see together (COMBINATIONS) and whether the report's *moves with* names each
-pair, rising together for a ratio and falling for a product. Rerunning continues the calibration and
-writes its report again.
+takes the knobs the renders see together (COMBINATIONS, then any other pair the report judges) and whether the
+report's *moves with* names each pair, rising together for a ratio and falling for a product, and pins what the
+pair makes together (RUN/calibrate/together.json). Rerunning continues the calibration and writes its report
+again.
 """
 from __future__ import annotations
 
@@ -87,17 +88,31 @@ def main() -> int:
     print(f"pinned knobs off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}; "
           f"{len(untold)} knobs the report cannot tell\n")
     # a ratio the renders see makes its knobs rise together along the objective's ridge, a product one fall as
-    # the other rises: the report's *moves with* should name the pair with that sign
-    print("| knobs together | truth | calibrated | off by | report: moves with |\n|---|---|---|---|---|")
-    named = 0
-    for label, (a, b, power) in COMBINATIONS.items():
+    # the other rises: the report's *moves with* should name the pair with that sign, and RUN/together.json
+    # judges what the chips pin of each pair it names; the pairs it names beyond COMBINATIONS follow them
+    together = json.loads((run / "together.json").read_text()) if (run / "together.json").is_file() else {}
+    rows = dict(COMBINATIONS)
+    for label, pair in together.items():
+        if not any({a, b} == set(pair["knobs"]) for a, b, _ in rows.values()):
+            rows[label] = (*pair["knobs"], pair["power"])
+    print("| knobs together | truth | calibrated | off by | report: moves with | pinned together |\n"
+          "|---|---|---|---|---|---|")
+    named, misses = 0, []
+    for label, (a, b, power) in rows.items():
         t, g = (table[a] * table[b] ** power for table in (truth, got))
         r = dict(pins[a].get("moves_with", [])).get(b)
         right = r is not None and (r > 0) == (power < 0)
-        named += right
+        named += right and label in COMBINATIONS
         seen = "not named" if r is None else f"{r:+.2f}{'' if right else ' (the wrong way)'}"
-        print(f"| {label} | {t:.4g} | {g:.4g} | {abs(g - t) / t:.0%} | {seen} |")
-    print(f"pairs the report names as moving together, the way the renders see them: {named} of {len(COMBINATIONS)}")
+        # the report's pair may be the inverse ratio (b : a): the same verdict, the kind of pair must agree
+        judged = [p for p in together.values() if set(p["knobs"]) == {a, b} and (p["power"] < 0) == (power < 0)]
+        pinned = judged[0]["pinned"] if judged else "—"
+        off = abs(g - t) / t
+        if pinned is True and off > RECOVERED:
+            misses.append(label)
+        print(f"| {label} | {t:.4g} | {g:.4g} | {off:.0%} | {seen} | {verdicts.get(pinned, pinned)} |")
+    print(f"pairs the report names as moving together, the way the renders see them: {named} of {len(COMBINATIONS)}; "
+          f"pairs pinned together off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}")
     return 0
 
 

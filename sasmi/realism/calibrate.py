@@ -258,7 +258,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     from sasmi.eval.features import as_encoder, describe_phi
     from sasmi.gan.loop import StopSignals
     from sasmi.images import FolderLock
-    from sasmi.realism.calibration_pins import sensitivity, trade_offs
+    from sasmi.realism.calibration_pins import what_the_chips_pin
     from sasmi.realism.calibration_report import searched_seconds, write_report
 
     cfg = cfg.validate()
@@ -309,8 +309,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             draws = [cfg.seed + 2 + k for k in range(2 * FRESH_DRAWS)]
             best_raw, best = calibrated_trial(study, preset, cfg, final, objectives, draws[:FRESH_DRAWS])
             trials = [(t.value, t.params) for t in study.trials if t.value is not None]
-            pins = trade_offs(sensitivity(best.params, objectives), trials, best.params, objectives,
-                              draws[FRESH_DRAWS:], cfg.profile_trials, cfg.seed)
+            pins, together = what_the_chips_pin(best.params, trials, objectives, draws[FRESH_DRAWS:],
+                                                cfg.profile_trials, cfg.seed)
             judged.close()
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
@@ -320,7 +320,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         if cfg.refine_steps:
             best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
                                                                 shown["calibrated"], progress)
-        write_report(out, record, cfg, preset, best_raw, real, study, shown, pins, refinement)
+        write_report(out, record, cfg, preset, best_raw, real, study, shown, pins, together, refinement)
     finally:
         lock.release()
     return out

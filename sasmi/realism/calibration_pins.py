@@ -4,7 +4,8 @@ A knob is pinned when moving it alone raises the objective (`sensitivity`) and n
 than SPAN away scores as well on other draws of the search's scenes (`trade_offs`). The rivals are the
 search's own best trials beyond SPAN and, where those leave a knob pinned or undecided, a profile: the knob
 held SPAN away and every other knob searched again from the ridge the best trials lie along. What a knob that
-trades trades with shows in the best trials, spread along the ridge (`moves_with`).
+trades trades with shows in the best trials, spread along the ridge (`moves_with`), and what the chips pin of
+such a pair, its ratio or its product, is judged as a knob is (`together`).
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ POPULATION = 8  # the profile's settings a generation
 PARTNER = 0.5  # a knob moves with another where they correlate at least this much among the best trials ...
 SURE = 3.5  # ... and the correlation's Fisher z is this many standard errors from 0: chance, over 14 knobs' 91
 # pairs, names one pair in 20 runs
+PAIRS = 6  # pairs of knobs that move together judged (and drawn), the most correlated first
 
 
 def _unit(name: str):
@@ -50,15 +52,16 @@ def sensitivity(best: dict[str, float], objectives_of) -> dict[str, dict]:
     return result
 
 
-def _beyond(name: str, best: float, trials: list[tuple[float, dict]]) -> dict[str, dict | str | None]:
-    """Below and above: the knobs of the trial scoring best on the search's scenes among those holding `name`
-    more than SPAN of `best` away on that side; "range" where the knob's range ends within SPAN, None where the
-    search tried nothing there."""
-    k, band = knob(name), SPAN * abs(best)
+def _beyond(value_of, centre: float, low: float, high: float,
+            trials: list[tuple[float, dict]]) -> dict[str, dict | str | None]:
+    """Below and above: the knobs of the trial scoring best on the search's scenes among those whose value_of(knobs)
+    (None where a trial lacks it) lies more than SPAN of `centre` away on that side; "range" where the values
+    reachable (`low` to `high`) end within SPAN, None where the search tried nothing there."""
+    band = SPAN * abs(centre)
     found = {}
-    for side, beyond, ends in (("below", lambda x: x < best - band, best - band <= k.low),
-                               ("above", lambda x: x > best + band, best + band >= k.high)):
-        there = [(value, knobs) for value, knobs in trials if name in knobs and beyond(knobs[name])]
+    for side, beyond, ends in (("below", lambda x: x < centre - band, centre - band <= low),
+                               ("above", lambda x: x > centre + band, centre + band >= high)):
+        there = [(value, knobs) for value, knobs in trials if (x := value_of(knobs)) is not None and beyond(x)]
         found[side] = min(there, key=lambda t: t[0])[1] if there else ("range" if ends else None)
     return found
 
@@ -106,43 +109,60 @@ def moves_with(moving: list[str], trials: list[tuple[float, dict]]) -> dict[str,
             for i, n in enumerate(moving)}
 
 
+def _local_search(starts: dict, free: dict, settle, objectives_of, budget: int, seed: int) -> dict:
+    """Per key, the setting scoring best on the search's scenes: its start, then CMA-ES generations over its `free`
+    knobs (search-range units, from the start), settle(key, setting) restoring what the key holds (None where it
+    cannot: not scored), `budget` settings a key in all, all keys scored together."""
+    import cmaes
+
+    found = dict(starts)
+    scores = dict(zip(found, objectives_of(list(found.values())))) if found else {}
+    searches = {}
+    for i, key in enumerate(found):
+        if free[key] and budget > 1:
+            state = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+            mean = np.array([_unit(n)[0](found[key][n]) for n in free[key]])
+            searches[key] = cmaes.CMA(mean=mean, sigma=SIGMA, bounds=np.array([[0.0, 1.0]] * len(free[key])),
+                                      seed=state, population_size=POPULATION)
+    for _ in range((budget - 1) // POPULATION if searches else 0):
+        asked = [(key, u, settle(key, {**found[key], **{n: _unit(n)[1](x) for n, x in zip(free[key], u)}}))
+                 for key, cma in searches.items() for u in (cma.ask() for _ in range(POPULATION))]
+        scored = [setting for _, _, setting in asked if setting is not None]
+        got = iter(objectives_of(scored) if scored else [])
+        values = [math.inf if setting is None else next(got) for _, _, setting in asked]
+        worst = max((v for v in values if math.isfinite(v)), default=1.0)
+        for key, cma in searches.items():  # ranks are what CMA-ES uses: one it could not score ranks last
+            cma.tell([(u, v if math.isfinite(v) else 10 * abs(worst) + 1)
+                      for (k, u, _), v in zip(asked, values) if k == key])
+        for (key, _, setting), value in zip(asked, values):
+            if value < scores[key]:
+                scores[key], found[key] = value, setting
+    return found
+
+
+def pairs(pins: dict[str, dict]) -> list[tuple[str, str, float]]:
+    """(knob, knob, correlation) of each pair one of them *moves with*, the strongest first, at most PAIRS."""
+    found = {tuple(sorted((name, other))): r for name, p in pins.items() for other, r in p.get("moves_with", [])}
+    return sorted(((a, b, r) for (a, b), r in found.items()), key=lambda pair: -abs(pair[2]))[:PAIRS]
+
+
 def profile(wanted: list[tuple[str, str]], best: dict[str, float], trials: list[tuple[float, dict]],
             objectives_of, budget: int, seed: int, searched: list[str] | None = None) -> dict[tuple[str, str], dict]:
     """Per (knob, side) in `wanted`, the setting scoring best on the search's scenes with the knob held SPAN below
     or above its calibrated value: the first on the ridge (`ridge`) through the calibrated preset, then CMA-ES
     generations from there over the other knobs (those `searched`, default all: the ones that move the objective
     are what can make up for the held one), `budget` settings a side in all, all sides scored together."""
-    import cmaes
-
     names = list(best)
     slopes = {name: ridge(name, best, trials) for name in dict.fromkeys(n for n, _ in wanted)}  # one line, both sides
-    found, searches = {}, {}
+    starts = {}
     for name, side in wanted:
         to = _unit(name)[0]
         held = best[name] * (1 - SPAN if side == "below" else 1 + SPAN)
         moved = to(held) - to(best[name])
-        found[name, side] = {n: held if n == name else _unit(n)[1](_unit(n)[0](best[n]) + slopes[name][n] * moved)
-                             for n in names}
-    if not found:
-        return {}
-    scores = dict(zip(found, objectives_of(list(found.values()))))
-    for i, (name, side) in enumerate(found):
-        free = [n for n in (names if searched is None else searched) if n != name]
-        if free and budget > 1:
-            state = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
-            mean = np.array([_unit(n)[0](found[name, side][n]) for n in free])
-            searches[name, side] = (free, cmaes.CMA(mean=mean, sigma=SIGMA, bounds=np.array([[0.0, 1.0]] * len(free)),
-                                                    seed=state, population_size=POPULATION))
-    for _ in range((budget - 1) // POPULATION if searches else 0):
-        asked = [(key, u, {**found[key], **{n: _unit(n)[1](x) for n, x in zip(free, u)}})
-                 for key, (free, cma) in searches.items() for u in (cma.ask() for _ in range(POPULATION))]
-        values = objectives_of([setting for _, _, setting in asked])
-        for key, (_, cma) in searches.items():
-            cma.tell([(u, v) for (k, u, _), v in zip(asked, values) if k == key])
-        for (key, _, setting), value in zip(asked, values):
-            if value < scores[key]:
-                scores[key], found[key] = value, setting
-    return found
+        starts[name, side] = {n: held if n == name else _unit(n)[1](_unit(n)[0](best[n]) + slopes[name][n] * moved)
+                              for n in names}
+    free = {(name, side): [n for n in (names if searched is None else searched) if n != name] for name, side in wanted}
+    return _local_search(starts, free, lambda key, setting: setting, objectives_of, budget, seed)
 
 
 def _rises(settings: list[dict], objectives_of, draws: list[int]) -> tuple[np.ndarray, list[tuple[float, float]]]:
@@ -182,17 +202,19 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     result = {name: {**p, "beyond": {}} for name, p in pins.items()}
     trialled = {}
     for name, p in pins.items():
-        for side, rival in (_beyond(name, best[name], trials) if p["alone"] else {}).items():
+        k = knob(name)
+        sides = _beyond(lambda knobs: knobs.get(name), best[name], k.low, k.high, trials) if p["alone"] else {}
+        for side, rival in sides.items():
             result[name]["beyond"][side] = None if isinstance(rival, dict) else rival  # None till scored
             if isinstance(rival, dict):
                 trialled[name, side] = rival
-    fresh = _judge(result, trialled, best, objectives_of, draws, profiled=False)
+    fresh = _judge(result, trialled, best, objectives_of, draws, _knob_value, profiled=False)
     wanted = [(name, side) for name, r in result.items() if r["alone"] and _pinned(True, r["beyond"]) is not False
               for side, rival in r["beyond"].items() if rival != "range" and best[name] != 0]
     if profile_budget and wanted:
         moving = [name for name, p in pins.items() if p["alone"]]
         _judge(result, profile(wanted, best, trials, objectives_of, profile_budget, seed, moving), best,
-               objectives_of, draws, profiled=True)
+               objectives_of, draws, _knob_value, profiled=True)
     partners = moves_with([name for name, p in pins.items() if p["alone"]], trials)
     for name, r in result.items():
         r.update(fresh=[float(f) for f in fresh], pinned=_pinned(r["alone"], r["beyond"]),
@@ -200,19 +222,93 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     return result
 
 
+def _knob_value(name: str, setting: dict) -> float:
+    return setting[name]
+
+
 def _judge(result: dict, rivals: dict[tuple[str, str], dict], best: dict[str, float], objectives_of,
-           draws: list[int], profiled: bool) -> np.ndarray:
-    """Score `rivals` ((knob, side) -> setting) beside `best` on `draws`; each becomes its side's rival in `result`
-    where it rises less than the one there. The calibrated preset's scores on the draws."""
+           draws: list[int], value_of, profiled: bool) -> np.ndarray:
+    """Score `rivals` ((key, side) -> setting) beside `best` on `draws`; each becomes its side's rival in `result`
+    (at value_of(key, setting)) where it rises less than the one there. The calibrated preset's scores."""
     settings = [best]
     for rival in rivals.values():
         if rival not in settings:
             settings.append(rival)
     fresh, rises = _rises(settings, objectives_of, draws)
-    for (name, side), rival in rivals.items():
+    for (key, side), rival in rivals.items():
         rise, error = rises[settings.index(rival)]
-        old = result[name]["beyond"][side]
+        old = result[key]["beyond"][side]
         if not isinstance(old, dict) or rise < old["rise"]:
-            result[name]["beyond"][side] = {"value": float(rival[name]), "rise": rise, "error": error,
-                                            "profiled": profiled}
+            result[key]["beyond"][side] = {"value": float(value_of(key, rival)), "rise": rise, "error": error,
+                                           "profiled": profiled}
     return fresh
+
+
+def _combination(a: str, b: str, power: int):
+    """knobs -> a x b^power, None where a trial lacks either or b is not positive."""
+    return lambda knobs: knobs[a] * knobs[b] ** power if a in knobs and b in knobs and knobs[b] > 0 else None
+
+
+def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], objectives_of,
+             draws: list[int], profile_budget: int = 0, seed: int = 0) -> dict[str, dict]:
+    """What the chips pin of each pair of knobs that move together (`pairs`): their ratio where they rise together
+    (altitude : near range), their product where one falls as the other rises (gain × albedo), judged as
+    `trade_offs` judges a knob: held SPAN below and above its calibrated value by the best trials there and, where
+    those leave it pinned or undecided, a profile (the pair's first knob set to hold the combination, the second and
+    every other moving knob searched again). Per pair, by its label: knobs, power (the second knob's), correlation,
+    calibrated (the combination's value), beyond and pinned."""
+    result, combos, trialled = {}, {}, {}
+    for a, b, r in pairs(pins):
+        if best[a] <= 0 or best[b] <= 0:
+            continue  # no ratio or product of a knob at 0
+        power = -1 if r > 0 else 1
+        label = f"{a} {':' if power < 0 else '×'} {b}"
+        value = combos[label] = _combination(a, b, power)
+        ka, kb = knob(a), knob(b)
+        ends = [x * y ** power for x in (ka.low, ka.high) for y in (kb.low, kb.high) if y > 0]
+        ends += [math.inf if power < 0 else 0.0] if kb.low <= 0 else []
+        result[label] = {"knobs": [a, b], "power": power, "correlation": r, "calibrated": value(best), "beyond": {}}
+        for side, rival in _beyond(value, value(best), min(ends), max(ends), trials).items():
+            result[label]["beyond"][side] = None if isinstance(rival, dict) else rival  # None till scored
+            if isinstance(rival, dict):
+                trialled[label, side] = rival
+    if not result:
+        return {}
+    def value_of(label, setting):
+        return combos[label](setting)
+
+    _judge(result, trialled, best, objectives_of, draws, value_of, profiled=False)
+    wanted = [(label, side) for label, r in result.items() if _pinned(True, r["beyond"]) is not False
+              for side, rival in r["beyond"].items() if rival != "range"]
+    if profile_budget and wanted:
+        moving = [n for n, p in pins.items() if p["alone"]]
+        held = {(label, side): result[label]["calibrated"] * (1 - SPAN if side == "below" else 1 + SPAN)
+                for label, side in wanted}
+
+        def settle(key, setting):  # the first knob set so that the pair holds its combination, None out of range
+            a, b = result[key[0]]["knobs"]
+            need = held[key] / setting[b] ** result[key[0]]["power"]
+            return {**setting, a: need} if knob(a).low <= need <= knob(a).high else None
+
+        starts, free = {}, {}
+        for key in wanted:
+            a, b = result[key[0]]["knobs"]
+            f, power = held[key] / result[key[0]]["calibrated"], result[key[0]]["power"]
+            # both knobs half the way, else the second alone, else the first alone
+            for moved in (best[b] * f ** (0.5 / power), best[b] * f ** (1 / power), best[b]):
+                start = settle(key, {**best, b: moved}) if knob(b).low <= moved <= knob(b).high else None
+                if start is not None:
+                    starts[key], free[key] = start, [n for n in moving if n != a]
+                    break
+        _judge(result, _local_search(starts, free, settle, objectives_of, profile_budget, seed), best,
+               objectives_of, draws, value_of, profiled=True)
+    for r in result.values():
+        r["pinned"] = _pinned(True, r["beyond"])
+    return result
+
+
+def what_the_chips_pin(best: dict[str, float], trials: list[tuple[float, dict]], objectives_of, draws: list[int],
+                       profile_budget: int = 0, seed: int = 0) -> tuple[dict[str, dict], dict[str, dict]]:
+    """Each knob's verdict (`sensitivity`, then `trade_offs`) and each moving pair's (`together`)."""
+    pins = trade_offs(sensitivity(best, objectives_of), trials, best, objectives_of, draws, profile_budget, seed)
+    return pins, together(pins, trials, best, objectives_of, draws, profile_budget, seed)

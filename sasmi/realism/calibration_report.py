@@ -1,4 +1,5 @@
-"""What `sasmi calibrate` writes: RUN/preset.toml, RUN/report.md, RUN/objective.png and RUN/sheet.png.
+"""What `sasmi calibrate` writes: RUN/preset.toml, RUN/report.md and its figures, and what the chips pin
+(RUN/sensitivity.json, knob by knob; RUN/together.json, pairs of knobs).
 
 The report compares the start and the calibrated preset on renders of scenes no trial rendered
 (seed + 1), each statistic against the real chips' median with its `sasmi stats --check` tolerance,
@@ -14,12 +15,11 @@ import numpy as np
 from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
 from sasmi.chips.stats import STATISTICS
 from sasmi.images import write_text
-from sasmi.realism.calibration_pins import PARTNER, RISE, SPAN, STEP, best_tenth
+from sasmi.realism.calibration_pins import PARTNER, RISE, SPAN, STEP, best_tenth, pairs
 from sasmi.realism.preset_space import knob, start_values
 
 SHOWN = 6  # chips per column of the sheet
 PARTNERS = 3  # knobs named in a row's *moves with*
-RIDGES = 6  # pairs of knobs drawn in ridges.png, the most correlated first
 
 
 def searched_seconds(study) -> float:
@@ -80,6 +80,25 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_bud
         partners = ", ".join(f"{m} ({r:+.2f})" for m, r in p.get("moves_with", [])[:PARTNERS]) or "—"
         lines.append(f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
                      f"{p['share']:+.0%} | {below} | {above} | {verdict[p['pinned']]} | {partners} |")
+    return lines
+
+
+def together_lines(together: dict[str, dict], profile_budget: int = 0) -> list[str]:
+    if not together:
+        return []
+    verdict = {True: "yes", False: "**no**", None: "cannot tell"}
+    lines = [f"**What the chips pin together.** Each pair of knobs above that moves together, judged as a knob is: "
+             f"its ratio (a : b, where they rise together) or product (a × b, where one falls as the other rises) "
+             f"held {SPAN:.0%} below and above its calibrated value by the best trials there"
+             + (f" and a profile (the first knob set to hold it, the others searched again, {profile_budget} "
+                f"settings a side)" if profile_budget else "")
+             + ", scored on the same other draws. A yes where neither knob alone is pinned: the chips pin what the "
+               "pair makes together (a grazing angle, a brightness, a size in pixels), not each knob.", "",
+             f"| knobs together | calibrated | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned |",
+             "|---|---|---|---|---|"]
+    for label, t in together.items():
+        below, above = (_side(t["beyond"][s]) for s in ("below", "above"))
+        lines.append(f"| {label} | {_number(t['calibrated'])} | {below} | {above} | {verdict[t['pinned']]} |")
     return lines
 
 
@@ -149,12 +168,6 @@ def objective_figure(study, path: Path) -> None:
     save_figure(fig, path)
 
 
-def ridge_pairs(pins: dict[str, dict]) -> list[tuple[str, str, float]]:
-    """(knob, knob, correlation) of each pair one of them *moves with*, the strongest first, at most RIDGES."""
-    pairs = {tuple(sorted((name, other))): r for name, p in pins.items() for other, r in p.get("moves_with", [])}
-    return sorted(((a, b, r) for (a, b), r in pairs.items()), key=lambda pair: -abs(pair[2]))[:RIDGES]
-
-
 def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float],
                   path: Path) -> bool:
     """Each pair of knobs that move together: every trial, the best tenth and the calibrated preset, on the
@@ -163,13 +176,13 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
 
     from sasmi.eval.report import save_figure
 
-    pairs = ridge_pairs(pins)
-    if not pairs:
+    drawn = pairs(pins)
+    if not drawn:
         return False
-    top = best_tenth(list({n for a, b, _ in pairs for n in (a, b)}), trials)
-    fig = Figure(figsize=(3.2 * min(len(pairs), 3), 3.0 * math.ceil(len(pairs) / 3)))
-    axes = np.atleast_1d(fig.subplots(math.ceil(len(pairs) / 3), min(len(pairs), 3))).ravel()
-    for ax, (a, b, r) in zip(axes, pairs):
+    top = best_tenth(list({n for a, b, _ in drawn for n in (a, b)}), trials)
+    fig = Figure(figsize=(3.2 * min(len(drawn), 3), 3.0 * math.ceil(len(drawn) / 3)))
+    axes = np.atleast_1d(fig.subplots(math.ceil(len(drawn) / 3), min(len(drawn), 3))).ravel()
+    for ax, (a, b, r) in zip(axes, drawn):
         for shown, style in ((trials, dict(s=4, color="0.75", label="trial")),
                              (top, dict(s=8, color="C0", label="best tenth"))):
             points = np.array([(knobs[a], knobs[b]) for _, knobs in shown if a in knobs and b in knobs])
@@ -179,7 +192,7 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
         ax.set(xlabel=a, ylabel=b, title=f"correlation {r:+.2f}", xscale="log" if knob(a).log else "linear",
                yscale="log" if knob(b).log else "linear")
     axes[0].legend(fontsize=7)
-    for ax in axes[len(pairs):]:
+    for ax in axes[len(drawn):]:
         ax.axis("off")
     fig.tight_layout()
     save_figure(fig, path)
@@ -209,12 +222,13 @@ def sheet_figure(real, shown: dict, path: Path) -> None:
 
 
 def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict,
-                 pins: dict[str, dict], refinement: dict | None = None) -> None:
+                 pins: dict[str, dict], together: dict[str, dict], refinement: dict | None = None) -> None:
     import json
 
     best = study.trials[study.user_attrs["calibrated_trial"]]
     draws, contenders = study.user_attrs["contenders"]["draws"], study.user_attrs["contenders"]["scores"]
     write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
+    write_text(out / "together.json", json.dumps(together, indent=2, ensure_ascii=False) + "\n")
     write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params, refinement))
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
@@ -241,6 +255,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         *statistics_table(real, shown), "",
         *refinement_lines(refinement),
         *sensitivity_lines(pins, best.params, cfg.profile_trials), "",
+        *together_lines(together, cfg.profile_trials), *([""] if together else []),
         "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
         "search: `objective.png`." + (" The knobs that move together, trial by trial: `ridges.png`." if ridges
                                       else ""), "",

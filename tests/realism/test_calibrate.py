@@ -155,6 +155,7 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     assert "25 trials" in report and (out / "sheet.png").is_file() and (out / "objective.png").is_file()
     assert "Precision / recall in φ" in report
     assert not (out / "ridges.png").exists() and "ridges.png" not in report  # one knob: no pair moves together
+    assert json.loads((out / "together.json").read_text()) == {} and "What the chips pin together" not in report
     pins = json.loads((out / "sensitivity.json").read_text())["post.gain"]
     # the gain moves the objective alone, and the best trials 15 % below and above it score worse on other draws
     assert "| post.gain | 0.3" in report and pins["alone"] and pins["pinned"] is True

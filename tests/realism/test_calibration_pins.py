@@ -1,5 +1,6 @@
-"""What `sasmi calibrate`'s report says each knob is pinned by: moved alone, then rivals held 15 % away (the
-search's trials and a profile) scored on other draws, on objectives whose ridges and noise are known."""
+"""What `sasmi calibrate`'s report says each knob, and each pair of knobs that move together, is pinned by: moved
+alone, then rivals held 15 % away (the search's trials and a profile) scored on other draws, on objectives whose
+ridges and noise are known."""
 from __future__ import annotations
 
 import math
@@ -7,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from sasmi.realism.calibration_pins import RISE, moves_with, profile, ridge, sensitivity, trade_offs
-from sasmi.realism.calibration_report import ridge_pairs, ridges_figure, sensitivity_lines
+from sasmi.realism.calibration_pins import (RISE, moves_with, pairs, profile, ridge, sensitivity, together,
+                                            trade_offs)
+from sasmi.realism.calibration_report import ridges_figure, sensitivity_lines, together_lines
 from sasmi.realism.preset_space import knob
 
 
@@ -213,12 +215,101 @@ def test_each_pair_of_knobs_that_move_together_is_drawn_once(tmp_path):
     pins = {"post.gain": {"moves_with": [("seafloor.albedo", -0.97), ("post.speckle_looks", 0.6)]},
             "seafloor.albedo": {"moves_with": [("post.gain", -0.97)]},
             "post.speckle_looks": {"moves_with": [("post.gain", 0.6)]}}
-    assert ridge_pairs(pins) == [("post.gain", "seafloor.albedo", -0.97), ("post.gain", "post.speckle_looks", 0.6)]
+    assert pairs(pins) == [("post.gain", "seafloor.albedo", -0.97), ("post.gain", "post.speckle_looks", 0.6)]
     rng = np.random.default_rng(3)
     trials = [(1.0 + rng.uniform(0, 0.1), {**BEST, "post.gain": g, "seafloor.albedo": 0.1 / g})
               for g in rng.uniform(0.2, 0.3, 50)]
     assert ridges_figure(pins, trials, BEST, tmp_path / "ridges.png")
     assert (tmp_path / "ridges.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     alone = {name: {"moves_with": []} for name in BEST}
-    assert ridge_pairs(alone) == [] and not ridges_figure(alone, trials, BEST, tmp_path / "none.png")
+    assert pairs(alone) == [] and not ridges_figure(alone, trials, BEST, tmp_path / "none.png")
     assert not (tmp_path / "none.png").exists()
+
+
+def _two_ridges(steep: float):
+    """gain x albedo seen (steeply, `steep`), altitude : near range seen as steeply, and the looks alone."""
+    def objective(v):
+        return (1.0 + steep * math.log(v["post.gain"] * v["seafloor.albedo"] / 0.1) ** 2
+                + 20 * math.log(v["sonar.altitude"] / v["sonar.near_range"] / 0.2) ** 2
+                + 10 * math.log(v["post.speckle_looks"] / 5) ** 2)
+    return objective
+
+
+TWO = {"post.gain": 0.25, "seafloor.albedo": 0.4, "sonar.altitude": 10.0, "sonar.near_range": 50.0,
+       "post.speckle_looks": 5.0}
+
+
+def _along_two_ridges(objective, seed: int = 4):
+    """The search's best trials: along both ridges within 2 %, never 15 % off either line."""
+    rng = np.random.default_rng(seed)
+    trials = []
+    for g, a in zip(np.exp(rng.uniform(math.log(0.2), math.log(0.3), 80)), rng.uniform(8.0, 12.0, 80)):
+        v = {"post.gain": g, "seafloor.albedo": 0.1 / g * math.exp(rng.normal(0, 0.02)), "sonar.altitude": a,
+             "sonar.near_range": a / 0.2 * math.exp(rng.normal(0, 0.02)),
+             "post.speckle_looks": 5.0 * math.exp(rng.normal(0, 0.2))}
+        trials.append((objective(v), v))
+    return trials
+
+
+def test_a_pair_that_trades_is_judged_together_the_ratio_or_product_the_chips_see():
+    """Neither gain nor albedo, altitude nor near range is pinned alone: each trades along its line. What the
+    chips see of each pair, the product gain x albedo and the ratio altitude : near range, held 15 % away by the
+    profile scores worse on other draws: pinned together. The search's trials never went that far off the lines,
+    so without a profile the report cannot tell; where the product is seen only faintly, it is not pinned."""
+    objective = _two_ridges(20.0)
+    trials = _along_two_ridges(objective)
+    draws = _on_draws(objective, lambda s: 0.2 * s)
+    pins = trade_offs(sensitivity(TWO, draws), trials, TWO, draws, [1, 2, 3], 9, seed=0)
+    assert [pins[n]["pinned"] for n in TWO] == [False, False, False, False, True]
+    judged = together(pins, trials, TWO, draws, [1, 2, 3], 9, seed=0)
+    assert set(judged) == {"post.gain × seafloor.albedo", "sonar.altitude : sonar.near_range"}
+    product, ratio = judged["post.gain × seafloor.albedo"], judged["sonar.altitude : sonar.near_range"]
+    assert product["power"] == 1 and product["correlation"] < -0.9 and ratio["power"] == -1
+    assert product["calibrated"] == pytest.approx(0.1) and ratio["calibrated"] == pytest.approx(0.2)
+    for pair, centre in ((product, 0.1), (ratio, 0.2)):
+        assert pair["pinned"] is True
+        for side, factor in (("below", 0.85), ("above", 1.15)):
+            found = pair["beyond"][side]
+            assert found["profiled"] and found["value"] == pytest.approx(centre * factor)
+            # 20 x log(1.15)² = 0.39 over the draws' mean of 1.4, the other knobs making up nothing more
+            assert found["rise"] == pytest.approx(20 * math.log(factor) ** 2 / 1.4, abs=0.03)
+    lines = "\n".join(together_lines(judged, 9))
+    assert "| post.gain × seafloor.albedo | 0.1 | 0.085 (profile): +38% ± 0% | 0.115 (profile): +28% ± 0% | yes |" \
+        in lines
+    unprofiled = together(pins, trials, TWO, draws, [1, 2, 3])
+    assert {pair["pinned"] for pair in unprofiled.values()} == {None}
+    assert unprofiled["post.gain × seafloor.albedo"]["beyond"] == {"below": None, "above": None}
+    faint = _two_ridges(0.5)  # 0.5 x log(1.15)² = 1 %: too little to pin the product
+    faint_draws = _on_draws(faint)
+    faint_pins = trade_offs(sensitivity(TWO, faint_draws), _along_two_ridges(faint), TWO, faint_draws, [1, 2], 9)
+    faint_pairs = together(faint_pins, _along_two_ridges(faint), TWO, faint_draws, [1, 2], 9)
+    assert faint_pairs["post.gain × seafloor.albedo"]["pinned"] is False
+    assert faint_pairs["sonar.altitude : sonar.near_range"]["pinned"] is True
+    assert together({n: {"alone": True, "moves_with": []} for n in TWO}, trials, TWO, draws, [1]) == {}
+
+
+def test_the_pair_profile_holds_the_combination_and_every_knob_in_its_range():
+    """Gain at the top of its range: held 15 % above, the product is reached only by albedo; no setting the
+    profile scores puts gain beyond its range, and each holds the product where it should."""
+    best = {"post.gain": 2.0, "seafloor.albedo": 0.05, "post.speckle_looks": 5.0}  # albedo at its range's foot
+    objective = _gain_albedo(20.0)
+    rng = np.random.default_rng(5)
+    trials = [(objective(v), v) for v in ({**best, "post.gain": g, "seafloor.albedo": 0.1 / g * math.exp(
+        rng.normal(0, 0.02))} for g in np.exp(rng.uniform(math.log(1.6), math.log(2.0), 60)))]
+    pins = {"post.gain": {"alone": True, "moves_with": [("seafloor.albedo", -0.99)]},
+            "seafloor.albedo": {"alone": True, "moves_with": [("post.gain", -0.99)]},
+            "post.speckle_looks": {"alone": True, "moves_with": []}}
+    scored = []
+
+    def objectives(settings, seed=0):
+        scored.extend(settings)
+        return [objective(v) for v in settings]
+
+    judged = together(pins, trials, best, objectives, [1, 2], 17)["post.gain × seafloor.albedo"]
+    assert max(v["post.gain"] for v in scored) <= knob("post.gain").high
+    assert min(v["seafloor.albedo"] for v in scored) >= knob("seafloor.albedo").low
+    for side, held in (("below", 0.085), ("above", 0.115)):
+        near = [v for v in scored if abs(v["post.gain"] * v["seafloor.albedo"] / held - 1) < 0.05]
+        assert len(near) > 8 and all(v["post.gain"] * v["seafloor.albedo"] == pytest.approx(held) for v in near)
+        assert judged["beyond"][side]["value"] == pytest.approx(held)
+    assert judged["pinned"] is True
