@@ -169,9 +169,10 @@ def objective_figure(study, path: Path) -> None:
 
 
 def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float],
-                  path: Path) -> bool:
+                  path: Path, together: dict[str, dict] | None = None) -> bool:
     """Each pair of knobs that move together: every trial, the best tenth and the calibrated preset, on the
-    search scales. False (and no file) where no pair moves together."""
+    search scales; where the pair was judged (`together`), the line holding its ratio or product and the lines
+    SPAN either side, with its verdict. False (and no file) where no pair moves together."""
     from matplotlib.figure import Figure
 
     from sasmi.eval.report import save_figure
@@ -182,15 +183,25 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
     top = best_tenth(list({n for a, b, _ in drawn for n in (a, b)}), trials)
     fig = Figure(figsize=(3.2 * min(len(drawn), 3), 3.0 * math.ceil(len(drawn) / 3)))
     axes = np.atleast_1d(fig.subplots(math.ceil(len(drawn) / 3), min(len(drawn), 3))).ravel()
+    verdict = {True: "yes", False: "no", None: "cannot tell"}
     for ax, (a, b, r) in zip(axes, drawn):
+        ax.set(xscale="log" if knob(a).log else "linear", yscale="log" if knob(b).log else "linear")
         for shown, style in ((trials, dict(s=4, color="0.75", label="trial")),
                              (top, dict(s=8, color="C0", label="best tenth"))):
             points = np.array([(knobs[a], knobs[b]) for _, knobs in shown if a in knobs and b in knobs])
             if len(points):
                 ax.scatter(points[:, 0], points[:, 1], **style)
         ax.scatter([best[a]], [best[b]], marker="*", s=120, color="C3", label="calibrated")
-        ax.set(xlabel=a, ylabel=b, title=f"correlation {r:+.2f}", xscale="log" if knob(a).log else "linear",
-               yscale="log" if knob(b).log else "linear")
+        judged = next((t for t in (together or {}).values() if t["knobs"] == [a, b]), None)
+        title = f"correlation {r:+.2f}"
+        if judged is not None:  # b = (c / a)^(1 / power): the pair's combination c held, and SPAN either side
+            (x0, x1), ylim = ax.get_xlim(), ax.get_ylim()
+            x = np.geomspace(x0, x1) if knob(a).log else np.linspace(max(x0, 1e-9 * x1), x1)
+            for share, style in ((1.0, "-"), (1 - SPAN, ":"), (1 + SPAN, ":")):
+                ax.plot(x, (judged["calibrated"] * share / x) ** (1 / judged["power"]), style, color="C3", lw=1)
+            ax.set(xlim=(x0, x1), ylim=ylim)
+            title += f", pinned together: {verdict[judged['pinned']]}"
+        ax.set(xlabel=a, ylabel=b, title=title)
     axes[0].legend(fontsize=7)
     for ax in axes[len(drawn):]:
         ax.axis("off")
@@ -233,7 +244,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     objective_figure(study, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
     trials = [(t.value, t.params) for t in study.trials if t.value is not None]
-    ridges = ridges_figure(pins, trials, best.params, out / "ridges.png")
+    ridges = ridges_figure(pins, trials, best.params, out / "ridges.png", together)
     if not ridges:  # a rerun's report: no figure of pairs this run does not find
         (out / "ridges.png").unlink(missing_ok=True)
     ratio = {n: f"{s['phi_ratio']:.2f} ± {s['phi_ratio_std']:.2f}" for n, (_, s) in shown.items()}
@@ -257,8 +268,8 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         *sensitivity_lines(pins, best.params, cfg.profile_trials), "",
         *together_lines(together, cfg.profile_trials), *([""] if together else []),
         "The calibrated preset: `preset.toml`. Real | start | calibrated: `sheet.png`. The objective over the "
-        "search: `objective.png`." + (" The knobs that move together, trial by trial: `ridges.png`." if ridges
-                                      else ""), "",
+        "search: `objective.png`." + (" The knobs that move together, trial by trial, and the ratio or product "
+                                      "judged: `ridges.png`." if ridges else ""), "",
         "![sheet](sheet.png)", "", "![objective](objective.png)", "",
         *(["![ridges](ridges.png)", ""] if ridges else []),
     ]

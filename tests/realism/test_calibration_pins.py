@@ -219,7 +219,9 @@ def test_each_pair_of_knobs_that_move_together_is_drawn_once(tmp_path):
     rng = np.random.default_rng(3)
     trials = [(1.0 + rng.uniform(0, 0.1), {**BEST, "post.gain": g, "seafloor.albedo": 0.1 / g})
               for g in rng.uniform(0.2, 0.3, 50)]
-    assert ridges_figure(pins, trials, BEST, tmp_path / "ridges.png")
+    judged = {"post.gain × seafloor.albedo": {"knobs": ["post.gain", "seafloor.albedo"], "power": 1,
+                                              "calibrated": 0.1, "pinned": True}}
+    assert ridges_figure(pins, trials, BEST, tmp_path / "ridges.png", judged)
     assert (tmp_path / "ridges.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     alone = {name: {"moves_with": []} for name in BEST}
     assert pairs(alone) == [] and not ridges_figure(alone, trials, BEST, tmp_path / "none.png")
