@@ -274,6 +274,7 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
                 trialled[label, side] = rival
     if not result:
         return {}
+
     def value_of(label, setting):
         return combos[label](setting)
 
@@ -287,8 +288,9 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
 
         def settle(key, setting):  # the first knob set so that the pair holds its combination, None out of range
             a, b = result[key[0]]["knobs"]
-            need = held[key] / setting[b] ** result[key[0]]["power"]
-            return {**setting, a: need} if knob(a).low <= need <= knob(a).high else None
+            need, k = held[key] / setting[b] ** result[key[0]]["power"], knob(a)
+            inside = k.low * (1 - 1e-9) <= need <= k.high * (1 + 1e-9)  # a range's end reached by rounding
+            return {**setting, a: min(max(need, k.low), k.high)} if inside else None
 
         starts, free = {}, {}
         for key in wanted:
