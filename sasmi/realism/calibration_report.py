@@ -174,6 +174,7 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
     search scales; where the pair was judged (`together`), the line holding its ratio or product and the lines
     SPAN either side, with its verdict. False (and no file) where no pair moves together."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     from sasmi.eval.report import save_figure
 
@@ -181,7 +182,7 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
     if not drawn:
         return False
     top = best_tenth(list({n for a, b, _ in drawn for n in (a, b)}), trials)
-    fig = Figure(figsize=(3.2 * min(len(drawn), 3), 3.0 * math.ceil(len(drawn) / 3)))
+    fig = Figure(figsize=(3.8 * min(len(drawn), 3), 3.2 * math.ceil(len(drawn) / 3)))
     axes = np.atleast_1d(fig.subplots(math.ceil(len(drawn) / 3), min(len(drawn), 3))).ravel()
     verdict = {True: "yes", False: "no", None: "cannot tell"}
     for ax, (a, b, r) in zip(axes, drawn):
@@ -193,15 +194,20 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
                 ax.scatter(points[:, 0], points[:, 1], **style)
         ax.scatter([best[a]], [best[b]], marker="*", s=120, color="C3", label="calibrated")
         judged = next((t for t in (together or {}).values() if t["knobs"] == [a, b]), None)
-        title = f"correlation {r:+.2f}"
+        title = f"r {r:+.2f}"
         if judged is not None:  # b = (c / a)^(1 / power): the pair's combination c held, and SPAN either side
             (x0, x1), ylim = ax.get_xlim(), ax.get_ylim()
             x = np.geomspace(x0, x1) if knob(a).log else np.linspace(max(x0, 1e-9 * x1), x1)
             for share, style in ((1.0, "-"), (1 - SPAN, ":"), (1 + SPAN, ":")):
                 ax.plot(x, (judged["calibrated"] * share / x) ** (1 / judged["power"]), style, color="C3", lw=1)
             ax.set(xlim=(x0, x1), ylim=ylim)
-            title += f", pinned together: {verdict[judged['pinned']]}"
+            title += f"; pinned together: {verdict[judged['pinned']]}"
         ax.set(xlabel=a, ylabel=b, title=title)
+        for axis, name in ((ax.xaxis, a), (ax.yaxis, b)):
+            if knob(name).log:  # a knob's range spans a decade or two: 1-2-5 ticks, plainly written
+                axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+                axis.set_minor_formatter(NullFormatter())
     axes[0].legend(fontsize=7)
     for ax in axes[len(drawn):]:
         ax.axis("off")
