@@ -69,7 +69,7 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_bud
                 f"{', '.join(untold)}. " if untold else "")
              + f"*Moves with*: the knobs moving the objective alone that rise (+) or fall (−) with this one among "
                f"the best tenth of the trials (correlation {PARTNER:g} or more either way, the strongest {PARTNERS}): "
-               f"along such a line the objective is flat, so what a knob trades with, the chips pin together.",
+               f"along such a line the objective is flat, so the chips see at most the pair together.",
              "",
              f"| knob | calibrated | moved to | objective rise | beyond −{SPAN:.0%} | beyond +{SPAN:.0%} | pinned "
              f"| moves with |",
