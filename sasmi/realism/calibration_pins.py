@@ -24,6 +24,7 @@ PARTNER = 0.5  # a knob moves with another where they correlate at least this mu
 SURE = 3.5  # ... and the correlation's Fisher z is this many standard errors from 0: chance, over 14 knobs' 91
 # pairs, names one pair in 20 runs
 PAIRS = 6  # pairs of knobs that move together judged (and drawn), the most correlated first
+MADE_UP = 3  # knobs named as what made up for a rival's held knob or pair: those it moved furthest
 
 
 def _unit(name: str):
@@ -208,13 +209,17 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
             result[name]["beyond"][side] = None if isinstance(rival, dict) else rival  # None till scored
             if isinstance(rival, dict):
                 trialled[name, side] = rival
-    fresh = _judge(result, trialled, best, objectives_of, draws, _knob_value, profiled=False)
+    moving = [name for name, p in pins.items() if p["alone"]]
+
+    def describe(name, setting):
+        return {"value": float(setting[name]), "made_up_by": _made_up_by(setting, best, moving, {name})}
+
+    fresh = _judge(result, trialled, best, objectives_of, draws, describe, profiled=False)
     wanted = [(name, side) for name, r in result.items() if r["alone"] and _pinned(True, r["beyond"]) is not False
               for side, rival in r["beyond"].items() if rival != "range" and best[name] != 0]
     if profile_budget and wanted:
-        moving = [name for name, p in pins.items() if p["alone"]]
         _judge(result, profile(wanted, best, trials, objectives_of, profile_budget, seed, moving), best,
-               objectives_of, draws, _knob_value, profiled=True)
+               objectives_of, draws, describe, profiled=True)
     partners = moves_with([name for name, p in pins.items() if p["alone"]], trials)
     for name, r in result.items():
         r.update(fresh=[float(f) for f in fresh], pinned=_pinned(r["alone"], r["beyond"]),
@@ -222,14 +227,18 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     return result
 
 
-def _knob_value(name: str, setting: dict) -> float:
-    return setting[name]
+def _made_up_by(setting: dict, best: dict[str, float], moving: list[str], held: set[str]) -> list[list]:
+    """[knob, value] of the MADE_UP knobs of `moving` but `held` that `setting` moves furthest from `best` on their
+    search scales: what let a rival hold a knob or pair away and score about as well."""
+    far = sorted(((abs(_unit(n)[0](setting[n]) - _unit(n)[0](best[n])), n) for n in moving
+                  if n not in held and n in setting), reverse=True)
+    return [[n, float(setting[n])] for moved, n in far[:MADE_UP] if moved > 1e-6]
 
 
 def _judge(result: dict, rivals: dict[tuple[str, str], dict], best: dict[str, float], objectives_of,
-           draws: list[int], value_of, profiled: bool) -> np.ndarray:
+           draws: list[int], describe, profiled: bool) -> np.ndarray:
     """Score `rivals` ((key, side) -> setting) beside `best` on `draws`; each becomes its side's rival in `result`
-    (at value_of(key, setting)) where it rises less than the one there. The calibrated preset's scores."""
+    (as describe(key, setting) tells it) where it rises less than the one there. The calibrated preset's scores."""
     settings = [best]
     for rival in rivals.values():
         if rival not in settings:
@@ -239,7 +248,7 @@ def _judge(result: dict, rivals: dict[tuple[str, str], dict], best: dict[str, fl
         rise, error = rises[settings.index(rival)]
         old = result[key]["beyond"][side]
         if not isinstance(old, dict) or rise < old["rise"]:
-            result[key]["beyond"][side] = {"value": float(value_of(key, rival)), "rise": rise, "error": error,
+            result[key]["beyond"][side] = {**describe(key, rival), "rise": rise, "error": error,
                                            "profiled": profiled}
     return fresh
 
@@ -275,14 +284,16 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
     if not result:
         return {}
 
-    def value_of(label, setting):
-        return combos[label](setting)
+    moving = [n for n, p in pins.items() if p["alone"]]
 
-    _judge(result, trialled, best, objectives_of, draws, value_of, profiled=False)
+    def describe(label, setting):
+        return {"value": float(combos[label](setting)),
+                "made_up_by": _made_up_by(setting, best, moving, set(result[label]["knobs"]))}
+
+    _judge(result, trialled, best, objectives_of, draws, describe, profiled=False)
     wanted = [(label, side) for label, r in result.items() if _pinned(True, r["beyond"]) is not False
               for side, rival in r["beyond"].items() if rival != "range"]
     if profile_budget and wanted:
-        moving = [n for n, p in pins.items() if p["alone"]]
         held = {(label, side): result[label]["calibrated"] * (1 - SPAN if side == "below" else 1 + SPAN)
                 for label, side in wanted}
 
@@ -303,7 +314,7 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
                     starts[key], free[key] = start, [n for n in moving if n != a]
                     break
         _judge(result, _local_search(starts, free, settle, objectives_of, profile_budget, seed), best,
-               objectives_of, draws, value_of, profiled=True)
+               objectives_of, draws, describe, profiled=True)
     for r in result.values():
         r["pinned"] = _pinned(True, r["beyond"])
     return result

@@ -37,7 +37,9 @@ def _side(found) -> str:
     if found == "range":
         return "range ends"
     profiled = " (profile)" if found.get("profiled") else ""
-    return f"{_number(found['value'])}{profiled}: {found['rise']:+.0%} ± {found['error']:.0%}"
+    moved = ", ".join(f"{n} {_number(v)}" for n, v in found.get("made_up_by", []))
+    return (f"{_number(found['value'])}{profiled}: {found['rise']:+.0%} ± {found['error']:.0%}"
+            + (f" (with {moved})" if moved else ""))
 
 
 def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_budget: int = 0) -> list[str]:

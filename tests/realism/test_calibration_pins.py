@@ -70,6 +70,9 @@ def test_knobs_that_trade_along_a_ridge_are_not_called_pinned():
                         [1, 2, 3, 4])
     assert traded["post.gain"]["pinned"] is False and traded["seafloor.albedo"]["pinned"] is False
     assert traded["post.gain"]["beyond"]["above"]["rise"] < 0.05
+    # the rival beyond +15 % held gain there with albedo lower, the looks nearly where they were
+    assert [n for n, _ in traded["post.gain"]["beyond"]["above"]["made_up_by"]] == ["seafloor.albedo",
+                                                                                    "post.speckle_looks"]
     assert traded["post.speckle_looks"]["pinned"] is True
     assert [traded["post.speckle_looks"]["beyond"][s]["value"] for s in ("below", "above")] == [3.0, 8.0]
     lines = "\n".join(sensitivity_lines(traded, best))
@@ -188,7 +191,8 @@ def test_a_ridge_the_search_did_not_follow_is_profiled_and_the_knobs_on_it_are_n
     # held 15 % away, nearer than the trials at 3 and 8: the looks' rivals are the profile's, and still worse
     looks = profiled["post.speckle_looks"]["beyond"]
     assert [looks[s]["value"] for s in ("below", "above")] == [pytest.approx(4.25), pytest.approx(5.75)]
-    assert "0.212 (profile): +0% ± 0% |" in "\n".join(sensitivity_lines(profiled, BEST, 9))
+    # what made up for the held gain: albedo, on the line gain x albedo = 0.1 (0.4 / 0.85)
+    assert "0.212 (profile): +0% ± 0% (with seafloor.albedo 0.471) |" in "\n".join(sensitivity_lines(profiled, BEST, 9))
 
 
 def test_the_profile_searches_the_other_knobs_where_the_trials_show_no_ridge():
