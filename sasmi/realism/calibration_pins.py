@@ -24,7 +24,7 @@ PARTNER = 0.5  # a knob moves with another where they correlate at least this mu
 SURE = 3.5  # ... and the correlation's Fisher z is this many standard errors from 0: chance, over 14 knobs' 91
 # pairs, names one pair in 20 runs
 PAIRS = 6  # pairs of knobs that move together judged (and drawn), the most correlated first
-MADE_UP = 3  # knobs named as what made up for a rival's held knob or pair: those it moved furthest
+MADE_UP = 3  # knobs a rival moved furthest, named beside it: where to look for what made up for the held one
 
 
 def _unit(name: str):
@@ -229,7 +229,8 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
 
 def _made_up_by(setting: dict, best: dict[str, float], moving: list[str], held: set[str]) -> list[list]:
     """[knob, value] of the MADE_UP knobs of `moving` but `held` that `setting` moves furthest from `best` on their
-    search scales: what let a rival hold a knob or pair away and score about as well."""
+    search scales: where to look for what let a rival hold a knob or pair away and score about as well (a knob the
+    objective barely sees wanders far in any trial)."""
     far = sorted(((abs(_unit(n)[0](setting[n]) - _unit(n)[0](best[n])), n) for n in moving
                   if n not in held and n in setting), reverse=True)
     return [[n, float(setting[n])] for moved, n in far[:MADE_UP] if moved > 1e-6]
