@@ -192,7 +192,8 @@ def test_a_ridge_the_search_did_not_follow_is_profiled_and_the_knobs_on_it_are_n
     looks = profiled["post.speckle_looks"]["beyond"]
     assert [looks[s]["value"] for s in ("below", "above")] == [pytest.approx(4.25), pytest.approx(5.75)]
     # what made up for the held gain: albedo, on the line gain x albedo = 0.1 (0.4 / 0.85)
-    assert "0.212 (profile): +0% ± 0% (with seafloor.albedo 0.471) |" in "\n".join(sensitivity_lines(profiled, BEST, 9))
+    lines = "\n".join(sensitivity_lines(profiled, BEST, 9))
+    assert "0.212 (profile): +0% ± 0% (with seafloor.albedo 0.471) |" in lines
 
 
 def test_the_profile_searches_the_other_knobs_where_the_trials_show_no_ridge():
