@@ -24,7 +24,7 @@ PARTNER = 0.5  # a knob moves with another where they correlate at least this mu
 SURE = 3.5  # ... and the correlation's Fisher z is this many standard errors from 0: chance, over 14 knobs' 91
 # pairs, names one pair in 20 runs
 PAIRS = 6  # pairs of knobs that move together judged (and drawn), the most correlated first
-MADE_UP = 3  # knobs a rival moved furthest, named beside it: where to look for what made up for the held one
+MOVED_TOO = 3  # knobs a rival moved furthest, named beside it: where to look for what made up for the held one
 
 
 def _unit(name: str):
@@ -212,7 +212,7 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     moving = [name for name, p in pins.items() if p["alone"]]
 
     def describe(name, setting):
-        return {"value": float(setting[name]), "made_up_by": _made_up_by(setting, best, moving, {name})}
+        return {"value": float(setting[name]), "moved_too": _moved_too(setting, best, moving, {name})}
 
     fresh = _judge(result, trialled, best, objectives_of, draws, describe, profiled=False)
     wanted = [(name, side) for name, r in result.items() if r["alone"] and _pinned(True, r["beyond"]) is not False
@@ -227,13 +227,13 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     return result
 
 
-def _made_up_by(setting: dict, best: dict[str, float], moving: list[str], held: set[str]) -> list[list]:
-    """[knob, value] of the MADE_UP knobs of `moving` but `held` that `setting` moves furthest from `best` on their
+def _moved_too(setting: dict, best: dict[str, float], moving: list[str], held: set[str]) -> list[list]:
+    """[knob, value] of the MOVED_TOO knobs of `moving` but `held` that `setting` moves furthest from `best` on their
     search scales: where to look for what let a rival hold a knob or pair away and score about as well (a knob the
     objective barely sees wanders far in any trial)."""
     far = sorted(((abs(_unit(n)[0](setting[n]) - _unit(n)[0](best[n])), n) for n in moving
                   if n not in held and n in setting), reverse=True)
-    return [[n, float(setting[n])] for moved, n in far[:MADE_UP] if moved > 1e-6]
+    return [[n, float(setting[n])] for moved, n in far[:MOVED_TOO] if moved > 1e-6]
 
 
 def _judge(result: dict, rivals: dict[tuple[str, str], dict], best: dict[str, float], objectives_of,
@@ -289,7 +289,7 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
 
     def describe(label, setting):
         return {"value": float(combos[label](setting)),
-                "made_up_by": _made_up_by(setting, best, moving, set(result[label]["knobs"]))}
+                "moved_too": _moved_too(setting, best, moving, set(result[label]["knobs"]))}
 
     _judge(result, trialled, best, objectives_of, draws, describe, profiled=False)
     wanted = [(label, side) for label, r in result.items() if _pinned(True, r["beyond"]) is not False

@@ -37,7 +37,7 @@ def _side(found) -> str:
     if found == "range":
         return "range ends"
     profiled = " (profile)" if found.get("profiled") else ""
-    moved = ", ".join(f"{n} {_number(v)}" for n, v in found.get("made_up_by", []))
+    moved = ", ".join(f"{n} {_number(v)}" for n, v in found.get("moved_too", []))
     return (f"{_number(found['value'])}{profiled}: {found['rise']:+.0%} ± {found['error']:.0%}"
             + (f" (with {moved})" if moved else ""))
 

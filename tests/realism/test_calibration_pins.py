@@ -71,7 +71,7 @@ def test_knobs_that_trade_along_a_ridge_are_not_called_pinned():
     assert traded["post.gain"]["pinned"] is False and traded["seafloor.albedo"]["pinned"] is False
     assert traded["post.gain"]["beyond"]["above"]["rise"] < 0.05
     # the rival beyond +15 % held gain there with albedo lower, the looks nearly where they were
-    assert [n for n, _ in traded["post.gain"]["beyond"]["above"]["made_up_by"]] == ["seafloor.albedo",
+    assert [n for n, _ in traded["post.gain"]["beyond"]["above"]["moved_too"]] == ["seafloor.albedo",
                                                                                     "post.speckle_looks"]
     assert traded["post.speckle_looks"]["pinned"] is True
     assert [traded["post.speckle_looks"]["beyond"][s]["value"] for s in ("below", "above")] == [3.0, 8.0]
