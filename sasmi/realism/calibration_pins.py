@@ -179,10 +179,12 @@ def _rises(settings: list[dict], objectives_of, draws: list[int]) -> tuple[np.nd
 
 
 def _pinned(alone: bool, sides: dict) -> bool | None:
+    """Sure either way by twice a rise's standard error over the draws: False where a side scores less than RISE
+    worse, True where both score RISE or more worse, None where the draws cannot tell or a side had no rival."""
     found = [v for v in sides.values() if isinstance(v, dict)]
-    if not alone or any(v["rise"] < RISE for v in found):
+    if not alone or any(v["rise"] + 2 * v["error"] < RISE for v in found):
         return False
-    if None in sides.values() or any(v["rise"] < 2 * v["error"] for v in found):
+    if None in sides.values() or any(v["rise"] < RISE or v["rise"] < 2 * v["error"] for v in found):
         return None
     return True
 
@@ -199,7 +201,8 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
     undecided is profiled too (`profile`, that many settings a side) and the lower of the two rises counts.
     pinned: True where a knob moves the objective alone and both sides score at least RISE worse on average,
     by more than twice the rise's standard error over the draws (or the knob's range ends there); False where
-    one scores less than RISE worse; None where the draws cannot tell or nothing was scored that far on a side."""
+    one scores less than RISE worse by as much; None where the draws cannot tell or nothing was scored that far on
+    a side."""
     result = {name: {**p, "beyond": {}} for name, p in pins.items()}
     trialled = {}
     for name, p in pins.items():
