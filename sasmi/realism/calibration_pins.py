@@ -179,8 +179,9 @@ def _rises(settings: list[dict], objectives_of, draws: list[int]) -> tuple[np.nd
 
 
 def _pinned(alone: bool, sides: dict) -> bool | None:
-    """Sure either way by twice a rise's standard error over the draws: False where a side scores less than RISE
-    worse, True where both score RISE or more worse, None where the draws cannot tell or a side had no rival."""
+    """False where a side scores less than RISE worse by more than twice its rise's standard error over the draws;
+    True where both score RISE or more worse on average, and worse by more than twice that error; None where the
+    draws cannot tell either or a side had no rival."""
     found = [v for v in sides.values() if isinstance(v, dict)]
     if not alone or any(v["rise"] + 2 * v["error"] < RISE for v in found):
         return False
