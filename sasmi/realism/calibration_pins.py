@@ -166,11 +166,14 @@ def profile(wanted: list[tuple[str, str]], best: dict[str, float], trials: list[
     return _local_search(starts, free, lambda key, setting: setting, objectives_of, budget, seed)
 
 
-def _rises(settings: list[dict], objectives_of, draws: list[int]) -> tuple[np.ndarray, list[tuple[float, float]]]:
-    """The first setting's objective on each of `draws`, and each setting's mean rise over it (as a share of its
-    mean) with the standard error over the draws: the same scenes for all, so the comparison is paired."""
-    scores = np.array([objectives_of(settings, seed) for seed in draws], dtype=float)  # (draws, settings)
-    fresh = scores[:, 0]
+def _rises(settings: list[dict], objectives_of, draws: list[int],
+           fresh: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[float, float]]]:
+    """`fresh`, the calibrated preset's objective on each of `draws` (None: the first setting's, scored here), and
+    each setting's mean rise over it (as a share of its mean) with the standard error over the draws: the same
+    scenes for all, so the comparison is paired."""
+    scores = np.array([objectives_of(settings, seed) if settings else [] for seed in draws],
+                      dtype=float).reshape(len(draws), len(settings))  # (draws, settings)
+    fresh = scores[:, 0] if fresh is None else np.asarray(fresh, dtype=float)
     rises = []
     for j in range(len(settings)):
         d = (scores[:, j] - fresh) / float(np.mean(fresh))
@@ -223,7 +226,7 @@ def trade_offs(pins: dict[str, dict], trials: list[tuple[float, dict]], best: di
               for side, rival in r["beyond"].items() if rival != "range" and best[name] != 0]
     if profile_budget and wanted:
         _judge(result, profile(wanted, best, trials, objectives_of, profile_budget, seed, moving), best,
-               objectives_of, draws, describe, profiled=True)
+               objectives_of, draws, describe, profiled=True, fresh=fresh)
     partners = moves_with([name for name, p in pins.items() if p["alone"]], trials)
     for name, r in result.items():
         r.update(fresh=[float(f) for f in fresh], pinned=_pinned(r["alone"], r["beyond"]),
@@ -241,14 +244,15 @@ def _moved_too(setting: dict, best: dict[str, float], moving: list[str], held: s
 
 
 def _judge(result: dict, rivals: dict[tuple[str, str], dict], best: dict[str, float], objectives_of,
-           draws: list[int], describe, profiled: bool) -> np.ndarray:
+           draws: list[int], describe, profiled: bool, fresh: np.ndarray | None = None) -> np.ndarray:
     """Score `rivals` ((key, side) -> setting) beside `best` on `draws`; each becomes its side's rival in `result`
-    (as describe(key, setting) tells it) where it rises less than the one there. The calibrated preset's scores."""
-    settings = [best]
+    (as describe(key, setting) tells it) where it rises less than the one there. The calibrated preset's scores on
+    the draws: `fresh` where given (the renders are the same for the same draw, so they are not scored again)."""
+    settings = [] if fresh is not None else [best]
     for rival in rivals.values():
         if rival not in settings:
             settings.append(rival)
-    fresh, rises = _rises(settings, objectives_of, draws)
+    fresh, rises = _rises(settings, objectives_of, draws, fresh)
     for (key, side), rival in rivals.items():
         rise, error = rises[settings.index(rival)]
         old = result[key]["beyond"][side]
@@ -264,13 +268,15 @@ def _combination(a: str, b: str, power: int):
 
 
 def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict[str, float], objectives_of,
-             draws: list[int], profile_budget: int = 0, seed: int = 0) -> dict[str, dict]:
+             draws: list[int], profile_budget: int = 0, seed: int = 0,
+             fresh: list[float] | None = None) -> dict[str, dict]:
     """What the chips pin of each pair of knobs that move together (`pairs`): their ratio where they rise together
     (altitude : near range), their product where one falls as the other rises (gain × albedo), judged as
     `trade_offs` judges a knob: held SPAN below and above its calibrated value by the best trials there and, where
     those leave it pinned or undecided, a profile (the pair's first knob set to hold the combination, the second and
-    every other moving knob searched again). Per pair, by its label: knobs, power (the second knob's), correlation,
-    calibrated (the combination's value), beyond and pinned."""
+    every other moving knob searched again). `fresh`: the calibrated preset's objective on `draws`, where
+    `trade_offs` scored it. Per pair, by its label: knobs, power (the second knob's), correlation, calibrated (the
+    combination's value), beyond and pinned."""
     result, combos, trialled = {}, {}, {}
     for a, b, r in pairs(pins):
         if best[a] <= 0 or best[b] <= 0:
@@ -295,7 +301,7 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
         return {"value": float(combos[label](setting)),
                 "moved_too": _moved_too(setting, best, moving, set(result[label]["knobs"]))}
 
-    _judge(result, trialled, best, objectives_of, draws, describe, profiled=False)
+    fresh = _judge(result, trialled, best, objectives_of, draws, describe, profiled=False, fresh=fresh)
     wanted = [(label, side) for label, r in result.items() if _pinned(True, r["beyond"]) is not False
               for side, rival in r["beyond"].items() if rival != "range"]
     if profile_budget and wanted:
@@ -319,7 +325,7 @@ def together(pins: dict[str, dict], trials: list[tuple[float, dict]], best: dict
                     starts[key], free[key] = start, [n for n in moving if n != a]
                     break
         _judge(result, _local_search(starts, free, settle, objectives_of, profile_budget, seed), best,
-               objectives_of, draws, describe, profiled=True)
+               objectives_of, draws, describe, profiled=True, fresh=fresh)
     for r in result.values():
         r["pinned"] = _pinned(True, r["beyond"])
     return result
@@ -329,4 +335,5 @@ def what_the_chips_pin(best: dict[str, float], trials: list[tuple[float, dict]],
                        profile_budget: int = 0, seed: int = 0) -> tuple[dict[str, dict], dict[str, dict]]:
     """Each knob's verdict (`sensitivity`, then `trade_offs`) and each moving pair's (`together`)."""
     pins = trade_offs(sensitivity(best, objectives_of), trials, best, objectives_of, draws, profile_budget, seed)
-    return pins, together(pins, trials, best, objectives_of, draws, profile_budget, seed)
+    fresh = next(iter(pins.values()))["fresh"] if pins else None
+    return pins, together(pins, trials, best, objectives_of, draws, profile_budget, seed, fresh)

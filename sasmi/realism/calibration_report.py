@@ -20,6 +20,7 @@ from sasmi.realism.preset_space import knob, start_values
 
 SHOWN = 6  # chips per column of the sheet
 PARTNERS = 3  # knobs named in a row's *moves with*
+VERDICTS = {True: "yes", False: "**no**", None: "cannot tell"}  # what the chips pin, as the tables say it
 
 
 def searched_seconds(study) -> float:
@@ -47,7 +48,6 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_bud
     traded = [n for n, p in pins.items() if p["alone"] and p["pinned"] is False]
     untold = [n for n, p in pins.items() if p["pinned"] is None]
     fresh = next(iter(pins.values()))["fresh"] if pins else [0.0]
-    verdict = {True: "yes", False: "**no**", None: "cannot tell"}
     lines = [f"**What the chips pin.** Each knob moved alone by {STEP:.0%} of its search range, down and up, from "
              f"the calibrated preset (the search's scenes): the chips pin it alone when the objective rises by "
              f"{RISE:.0%} or more. " + (f"These they cannot pin, any value scoring alike: {', '.join(loose)}. "
@@ -82,14 +82,13 @@ def sensitivity_lines(pins: dict[str, dict], best: dict[str, float], profile_bud
         below, above = (_side(sides[s]) if s in sides else "—" for s in ("below", "above"))
         partners = ", ".join(f"{m} ({r:+.2f})" for m, r in p.get("moves_with", [])[:PARTNERS]) or "—"
         lines.append(f"| {n} | {_number(best[n])} | {_number(p['moved'][0])}, {_number(p['moved'][1])} | "
-                     f"{p['share']:+.0%} | {below} | {above} | {verdict[p['pinned']]} | {partners} |")
+                     f"{p['share']:+.0%} | {below} | {above} | {VERDICTS[p['pinned']]} | {partners} |")
     return lines
 
 
 def together_lines(together: dict[str, dict], profile_budget: int = 0) -> list[str]:
     if not together:
         return []
-    verdict = {True: "yes", False: "**no**", None: "cannot tell"}
     lines = [f"**What the chips pin together.** Each pair of knobs above that moves together, judged as a knob is: "
              f"its ratio (a : b, where they rise together) or product (a × b, where one falls as the other rises) "
              f"held {SPAN:.0%} below and above its calibrated value by the best trials there"
@@ -101,7 +100,7 @@ def together_lines(together: dict[str, dict], profile_budget: int = 0) -> list[s
              "|---|---|---|---|---|"]
     for label, t in together.items():
         below, above = (_side(t["beyond"][s]) for s in ("below", "above"))
-        lines.append(f"| {label} | {_number(t['calibrated'])} | {below} | {above} | {verdict[t['pinned']]} |")
+        lines.append(f"| {label} | {_number(t['calibrated'])} | {below} | {above} | {VERDICTS[t['pinned']]} |")
     return lines
 
 
@@ -187,7 +186,6 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
     top = best_tenth(list({n for a, b, _ in drawn for n in (a, b)}), trials)
     fig = Figure(figsize=(3.8 * min(len(drawn), 3), 3.2 * math.ceil(len(drawn) / 3)))
     axes = np.atleast_1d(fig.subplots(math.ceil(len(drawn) / 3), min(len(drawn), 3))).ravel()
-    verdict = {True: "yes", False: "no", None: "cannot tell"}
     for ax, (a, b, r) in zip(axes, drawn):
         ax.set(xscale="log" if knob(a).log else "linear", yscale="log" if knob(b).log else "linear")
         for shown, style in ((trials, dict(s=4, color="0.75", label="trial")),
@@ -204,7 +202,7 @@ def ridges_figure(pins: dict[str, dict], trials: list[tuple[float, dict]], best:
             for share, style in ((1.0, "-"), (1 - SPAN, ":"), (1 + SPAN, ":")):
                 ax.plot(x, (judged["calibrated"] * share / x) ** (1 / judged["power"]), style, color="C3", lw=1)
             ax.set(xlim=(x0, x1), ylim=ylim)
-            title += f"; pinned together: {verdict[judged['pinned']]}"
+            title += f"; pinned together: {VERDICTS[judged['pinned']].strip('*')}"
         ax.set(xlabel=a, ylabel=b, title=title)
         for axis, name in ((ax.xaxis, a), (ax.yaxis, b)):
             if knob(name).log:  # a knob's range spans a decade or two: 1-2-5 ticks, plainly written

@@ -321,6 +321,7 @@ def test_the_pair_profile_holds_the_combination_and_every_knob_in_its_range():
         return [objective(v) for v in settings]
 
     judged = together(pins, trials, best, objectives, [1, 2], 17)["post.gain × seafloor.albedo"]
+    assert sum(v == best for v in scored) == 2  # the calibrated preset once a draw: the profile's rivals beside it
     assert max(v["post.gain"] for v in scored) <= knob("post.gain").high
     assert min(v["seafloor.albedo"] for v in scored) >= knob("seafloor.albedo").low
     for side, held in (("below", 0.085), ("above", 0.115)):
