@@ -1,12 +1,12 @@
 """Does `sasmi calibrate` recover a known preset, and does its report say which knobs it cannot pin?
 
     python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32]
-                                            [--profile-trials N] [--table-only]
+                                            [--params a,b,...] [--profile-trials N] [--table-only]
 
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
-knob for --minutes, and the table compares each knob's calibrated value with the truth beside the
-report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best
+knob (or those --params names, the rest held at the start's values: the truth's but for TRUTH's) for
+--minutes, and the table compares each knob's calibrated value with the truth beside the report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best
 trials holding it more than 15 % away, and its profile there, score worse on other draws). A second table
 takes the knobs the renders see together (COMBINATIONS, then any other pair the report judges) and whether the
 report's *moves with* names each pair, rising together for a ratio and falling for a product, and pins what the
@@ -39,16 +39,25 @@ def main() -> int:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--minutes", type=float, default=20.0)
     p.add_argument("--chips", type=int, default=32, help="renders a trial (calibrate's --chips)")
+    p.add_argument("--params", default="default",
+                   help="knobs searched, comma-separated (calibrate's --params); the tables show the run's")
     p.add_argument("--profile-trials", type=int, help="calibrate's --profile-trials (default: its default)")
     p.add_argument("--table-only", action="store_true", help="print the tables of a finished run, calibrating no more")
     args = p.parse_args()
 
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
     from sasmi.realism.fit_scene import preset_toml
-    from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, centre, start_values
+    from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, centre, check_knobs, start_values
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.scene.preset import Preset, load_preset
 
+    from sasmi.errors import SasmiError
+
+    params = DEFAULT_KNOBS if args.params == "default" else tuple(n.strip() for n in args.params.split(",") if n)
+    try:
+        check_knobs(params)
+    except SasmiError as e:
+        p.error(str(e))
     start = load_preset(START)
     truth_raw = apply(start.raw, TRUTH)
     chips, run = args.out / "truth-chips", args.out / "calibrate"
@@ -57,26 +66,28 @@ def main() -> int:
         (args.out / "truth.toml").write_text(preset_toml(truth_raw))
         render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
                              size=128))
-        cfg = CalibrateConfig(minutes=args.minutes, chips=args.chips)
+        cfg = CalibrateConfig(params=params, minutes=args.minutes, chips=args.chips)
         if args.profile_trials is not None:
             cfg = replace(cfg, profile_trials=args.profile_trials)
         calibrate(chips / "images", START, cfg, run)
     elif not (run / "sensitivity.json").is_file():
         sys.exit(f"{run}: no finished calibration; run without --table-only first")
     pins = json.loads((run / "sensitivity.json").read_text())
+    params = tuple(json.loads((run / "calibrate.json").read_text())["identity"]["params"])  # the run's, as searched
     calibrated_raw = load_preset(run / "preset.toml").raw
-    truth, got, before = (start_values(raw, DEFAULT_KNOBS) for raw in (truth_raw, calibrated_raw, start.raw))
+    truth, got, before = (start_values(raw, params) for raw in (truth_raw, calibrated_raw, start.raw))
     for name, key in (("targets.size", "length"), ("targets.burial", "burial")):
         # start_values gives the factor 1 for any preset: compare the first target's field with the start's
         first = [raw["targets"][0].get(key) for raw in (start.raw, truth_raw, calibrated_raw)]
         if first[0]:
             before[name], truth[name], got[name] = (centre(v) / centre(first[0]) for v in first)
     for table in (before, truth, got):  # targets.size scales burial too: the burial knob is what is left
-        table["targets.burial"] /= table["targets.size"]
+        if "targets.burial" in table:
+            table["targets.burial"] /= table.get("targets.size", 1.0)
     print("| knob | start | truth | calibrated | off by | pinned by the chips |\n|---|---|---|---|---|---|")
     misses, untold = [], []
     verdicts = {True: "yes", False: "no", None: "cannot tell"}
-    for name in DEFAULT_KNOBS:
+    for name in params:
         off = abs(got[name] - truth[name]) / max(abs(truth[name]), 1e-9)
         pinned = pins[name]["pinned"]
         if pinned and off > RECOVERED:
@@ -91,7 +102,7 @@ def main() -> int:
     # the other rises: the report's *moves with* should name the pair with that sign, and RUN/together.json
     # judges what the chips pin of each pair it names; the pairs it names beyond COMBINATIONS follow them
     together = json.loads((run / "together.json").read_text()) if (run / "together.json").is_file() else {}
-    rows = dict(COMBINATIONS)
+    rows = {label: row for label, row in COMBINATIONS.items() if {row[0], row[1]} <= set(params)}
     for label, pair in together.items():
         if not any({a, b} == set(pair["knobs"]) for a, b, _ in rows.values()):
             rows[label] = (*pair["knobs"], pair["power"])
@@ -111,7 +122,8 @@ def main() -> int:
         if pinned is True and off > RECOVERED:
             misses.append(label)
         print(f"| {label} | {t:.4g} | {g:.4g} | {off:.0%} | {seen} | {verdicts.get(pinned, pinned)} |")
-    print(f"pairs the report names as moving together, the way the renders see them: {named} of {len(COMBINATIONS)}; "
+    physical = sum(label in COMBINATIONS for label in rows)
+    print(f"pairs the report names as moving together, the way the renders see them: {named} of {physical}; "
           f"pairs pinned together off by more than {RECOVERED:.0%}: {', '.join(misses) or 'none'}")
     return 0
 
