@@ -49,7 +49,7 @@ def main() -> int:
         render_set(RenderJob(preset=load_preset("seafloor_only"), out=tmp / "renders", count=args.count, seed=0,
                              size=128), progress=False)
         renders = [load_image(f, 128).astype(np.float64) for f in list_images(tmp / "renders" / "images")]
-    train, empty = floors["train"], np.zeros((128, 128), np.uint8)
+    train = floors["train"]
     rng = np.random.default_rng(0)
 
     def render_speckle(i: int) -> np.ndarray:
@@ -57,7 +57,7 @@ def main() -> int:
         seabed = draw_seabed(seabeds, (128, 128), rng_i) * gain_bands(128, rng_i)[:, None]
         return seabed * speckle_of(renders[i])
 
-    sets = {"drawn": [seabed_floor(seabeds, renders[i], empty, 0, i) for i in range(args.count)],
+    sets = {"drawn": [seabed_floor(seabeds, renders[i].shape, 0, i) for i in range(args.count)],
             "render speckle": [render_speckle(i) for i in range(args.count)],
             "real fresh": [fresh_floor(*(train[j] for j in rng.integers(len(train), size=2)), rng)
                            for _ in range(args.count)],

@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
 
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.errors import SasmiError
-    from sasmi.realism.floors import on_floor
+    from sasmi.realism.floors import FloorsAhead, on_floor
     from sasmi.images import list_images
     from sasmi.scene.preset import load_preset
 
@@ -67,28 +67,37 @@ def run(args: argparse.Namespace) -> int:
     recorded, floor_of, relabel = floor_source(args, job.size)
     identity.update(recorded)
 
+    # once a batch is translated, the next batch's floors are drawn while it is written and the next renders
+    floors = FloorsAhead(floor_of, job.indices(), args.batch) if relabel else None
+
     def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
         if relabel:
-            images = np.stack([on_floor(image, mask, floor_of(image, mask, i))
-                               for image, mask, i in zip(images, masks, indices)])
+            images = np.stack([on_floor(image, mask, floors(i)) for image, mask, i in zip(images, masks, indices)])
         # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
-        return translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
+        translated = translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
+        if relabel:
+            floors.draw_after(max(indices))
+        return translated
 
-    render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel)
+    try:
+        render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel)
+    finally:
+        if floors is not None:
+            floors.close()
     which = f"the generator {args.generator}" if args.generator else "the shipped generator"
     print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}, by {which}")
     return 0
 
 
 def floor_source(args: argparse.Namespace, size: int):
-    """What each render is laid on before the generator: (what the set's identity records, floor_of(image,
-    mask, i), relabel(label, i)), or ({}, None, None) to translate the renders as they are."""
+    """What each render is laid on before the generator: (what the set's identity records, floor_of(i),
+    relabel(label, i)), or ({}, None, None) to translate the renders as they are."""
     from sasmi.realism.floors import floor_for, floor_label, matching_floors, seabed_floor, seabed_floor_label
 
     if args.floors:
         floors = matching_floors(args.floors, args.real, size)
         return ({"floors": sorted({str(Path(f).resolve()) for f in floors})},
-                lambda image, mask, i: floor_for(floors, args.seed, i, size),
+                lambda i: floor_for(floors, args.seed, i, size),
                 lambda label, i: floor_label(label, floors, args.seed, i))
     if args.seabeds or args.generator is None:  # the shipped generator learned from renders on drawn seabeds
         from sasmi.realism.seabeds import load_seabeds
@@ -96,6 +105,6 @@ def floor_source(args: argparse.Namespace, size: int):
 
         seabeds = load_seabeds(args.seabeds or shipped("seabeds"))
         return ({"seabeds_sha256": hashlib.sha256(seabeds.path.read_bytes()).hexdigest()},
-                lambda image, mask, i: seabed_floor(seabeds, image, mask, args.seed, i),
+                lambda i: seabed_floor(seabeds, (size, size), args.seed, i),
                 lambda label, i: seabed_floor_label(label, seabeds, args.seed, i))
     return {}, None, None

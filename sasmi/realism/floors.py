@@ -159,12 +159,12 @@ def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Gene
     return np.clip(seabed * np.roll(speckle, shift, axis=0), 0.0, 1.0).astype(np.float32)
 
 
-def seabed_floor(seabeds, render01: np.ndarray, mask: np.ndarray, seed: int, index: int) -> np.ndarray:
-    """(H, W) in [0, 1]: chip `index`'s floor, drawn from `seabeds` (sasmi.realism.seabeds.draw_floor) from a
-    stream seeded by (seed, index) alone. The render gives only its shape: its own speckle, which no real sonar
+def seabed_floor(seabeds, shape: tuple[int, int], seed: int, index: int) -> np.ndarray:
+    """`shape` in [0, 1]: chip `index`'s floor, drawn from `seabeds` (sasmi.realism.seabeds.draw_floor) from a
+    stream seeded by (seed, index) alone. Nothing of the render but its shape: its speckle, which no real sonar
     made, is replaced as a real floor chip replaces it. No gain bands: a drawn seabed keeps its source's swings
     along track, and bands on top swing half as much again as real target chips do (`sasmi stats`)."""
-    floor = draw_floor(seabeds, render01.shape, np.random.default_rng([seed, index]))
+    floor = draw_floor(seabeds, shape, np.random.default_rng([seed, index]))
     return np.clip(floor, 0.0, 1.0).astype(np.float32)
 
 
@@ -214,18 +214,18 @@ def onto_real_floors(renders: str | os.PathLike, floors: str | os.PathLike, targ
     if not list_images(floors):
         raise SasmiError(f"--floors {floors}: no image (png, jpg, tif, tiff, npy) in it")
     choices = matching_floors(floors, targets, size)
-    return onto_floors(renders, out, size, lambda render, mask, i: floor_for(choices, seed, i, size),
+    return onto_floors(renders, out, size, lambda i: floor_for(choices, seed, i, size),
                        lambda label, i: floor_label(label, choices, seed, i))
 
 
 def onto_seabed_floors(renders: str | os.PathLike, seabeds, out: str | os.PathLike, size: int, seed: int = 0) -> int:
     """`onto_real_floors` with `seabed_floor`s, as `sasmi generate` lays renders with the shipped generator."""
-    return onto_floors(renders, out, size, lambda render, mask, i: seabed_floor(seabeds, render, mask, seed, i),
+    return onto_floors(renders, out, size, lambda i: seabed_floor(seabeds, (size, size), seed, i),
                        lambda label, i: seabed_floor_label(label, seabeds, seed, i))
 
 
 def onto_floors(renders: str | os.PathLike, out: str | os.PathLike, size: int, floor_of, relabel) -> int:
-    """Chip i of the render set `renders` on the floor `floor_of(render, mask, i)`, into the render set `out`."""
+    """Chip i of the render set `renders` on the floor `floor_of(i)`, into the render set `out`."""
     from sasmi.gan.translate import carry_labels
     from sasmi.masks import read_mask
     from sasmi.preprocess import load_image
@@ -239,7 +239,44 @@ def onto_floors(renders: str | os.PathLike, out: str | os.PathLike, size: int, f
         mask = read_mask(renders / "masks" / f"{path.stem}.png")
         if mask.shape != render.shape:
             raise SasmiError(f"{renders / 'masks' / path.stem}.png: mask {mask.shape} against image {render.shape}")
-        write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor_of(render, mask, index)))
-    position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_of(..., i)
+        write_gray(out / "images" / f"{path.stem}.png", on_floor(render, mask, floor_of(index)))
+    position = {path.stem: index for index, path in enumerate(paths)}  # chip i's floor is floor_of(i)
     carry_labels(renders, out, lambda label: relabel(label, position[Path(label.image).stem]))
     return len(paths)
+
+
+class FloorsAhead:
+    """floor_of(i) for the chips of `order`, drawn on a thread: draw_after(i) starts the `ahead` chips after chip i,
+    to be drawn while the next chips render. numpy's FFTs and sorts, most of a drawn floor's time, release the GIL,
+    and the render leaves core time idle where the generator leaves none. The same floors as floor_of(i) called
+    here; a chip not drawn ahead is drawn here, and one drawn ahead but never asked for is dropped once `ahead`
+    chips behind (a resumed run skips the chips it has, and render workers finish in any order)."""
+
+    def __init__(self, floor_of, order: list[int], ahead: int):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._floor_of, self._order, self._ahead = floor_of, list(order), ahead
+        self._position = {index: k for k, index in enumerate(self._order)}
+        self._submitted = 0  # the chips of `order` before this position have been started
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="floors")
+        self._pending: dict = {}  # index -> Future
+
+    def __call__(self, index: int) -> np.ndarray:
+        future = self._pending.pop(index, None)
+        return future.result() if future is not None else self._floor_of(index)
+
+    def draw_after(self, index: int) -> None:
+        """Start drawing the `ahead` chips after `index` in the order (those not started yet)."""
+        at = self._position.get(index)
+        if at is None:
+            return
+        for behind in [i for i in self._pending if self._position[i] < at - self._ahead]:
+            self._pending.pop(behind).cancel()
+        for i in self._order[max(self._submitted, at + 1):at + 1 + self._ahead]:
+            self._pending[i] = self._pool.submit(self._floor_of, i)
+        self._submitted = max(self._submitted, at + 1 + self._ahead)
+
+    def close(self) -> None:
+        for future in self._pending.values():
+            future.cancel()
+        self._pool.shutdown(wait=True)

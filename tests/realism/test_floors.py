@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sasmi.realism.floors import BANDS, FLOOR_CHOICES, fresh_floor, matching_floors, on_floor
+from sasmi.realism.floors import BANDS, FLOOR_CHOICES, FloorsAhead, fresh_floor, matching_floors, on_floor
 from sasmi.images import write_gray
 
 SIZE = 64
@@ -210,3 +210,55 @@ def test_display_bend():
     np.testing.assert_array_equal(bent(v, np.inf), v)
     with np.errstate(all="raise"):  # a black chip's ceiling: no division by zero
         np.testing.assert_array_equal(bent(v, 0.0), np.zeros_like(v))
+
+
+class _Drawn:
+    """A floor_of that records which chips it drew, and on which thread."""
+
+    def __init__(self):
+        import threading
+
+        self.calls, self._lock = [], threading.Lock()
+
+    def __call__(self, index: int) -> np.ndarray:
+        import threading
+
+        with self._lock:
+            self.calls.append((index, threading.current_thread().name))
+        return np.full((4, 4), float(index), np.float32)
+
+    def drawn(self) -> list[int]:
+        return sorted(i for i, _ in self.calls)
+
+
+def test_floors_ahead_draws_the_next_chips_on_its_thread_and_each_once():
+    drawn = _Drawn()
+    floors = FloorsAhead(drawn, list(range(10)), ahead=3)
+    try:
+        np.testing.assert_array_equal(floors(0), np.zeros((4, 4)))  # nothing drawn ahead yet: drawn here
+        floors.draw_after(0)
+        floors._pool.submit(lambda: None).result()  # the thread has drawn what was asked of it
+        assert drawn.drawn() == [0, 1, 2, 3]
+        assert all(name.startswith("floors") for i, name in drawn.calls if i > 0)  # ahead, on the thread
+        for i in range(1, 10):
+            np.testing.assert_array_equal(floors(i), np.full((4, 4), float(i)))
+            floors.draw_after(i)
+    finally:
+        floors.close()
+    assert drawn.drawn() == list(range(10))  # each chip once, none past the order
+
+
+def test_floors_ahead_skips_chips_a_resumed_run_has_and_draws_out_of_order_ones_here():
+    drawn = _Drawn()
+    order = list(range(0, 40, 2))  # a shard's chips
+    floors = FloorsAhead(drawn, order, ahead=2)
+    try:
+        for i in (10, 14, 12, 16, 30, 20):  # resumed at 10; workers finishing out of order; 18 never asked for
+            np.testing.assert_array_equal(floors(i), np.full((4, 4), float(i)))
+            floors.draw_after(i)
+            floors._pool.submit(lambda: None).result()
+    finally:
+        floors.close()
+    assert not {i for i, _ in drawn.calls} & {0, 2, 4, 6, 8}  # the chips the run had are not drawn
+    assert set(drawn.drawn()) <= set(order)
+    assert [drawn.drawn().count(i) for i in (12, 14, 16)] == [1, 1, 1]  # 12 asked for after 14, yet drawn once

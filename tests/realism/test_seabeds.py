@@ -273,9 +273,9 @@ def test_seabed_floor_replaces_the_renders_speckle_with_a_drawn_one(seabeds):
     speckle = rng.gamma(4, 1 / 4, (SIZE, SIZE))
     render = np.clip(0.3 * speckle, 0, 1).astype(np.float32)
     render[mask == 1], render[mask == 2] = 0.9, 0.03
-    floor = seabed_floor(seabeds, render, mask, 0, 5)
-    np.testing.assert_array_equal(floor, seabed_floor(seabeds, render, mask, 0, 5))  # (seed, index) alone
-    assert not np.array_equal(floor, seabed_floor(seabeds, render, mask, 0, 6))
+    floor = seabed_floor(seabeds, render.shape, 0, 5)
+    np.testing.assert_array_equal(floor, seabed_floor(seabeds, render.shape, 0, 5))  # (seed, index) alone
+    assert not np.array_equal(floor, seabed_floor(seabeds, render.shape, 0, 6))
     assert abs(np.corrcoef(floor.ravel(), render.ravel())[0, 1]) < 0.1   # nothing of the render's speckle
     assert _lag1(floor, 1) > 0.3 + _lag1(render, 1)                      # the sources' grain instead
     out = on_floor(render, mask, floor)
