@@ -6,10 +6,11 @@
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
 knob (or those --params names, the rest held at the start's values: the truth's but for TRUTH's) for
---minutes, and the table compares each knob's calibrated value with the truth beside the report's verdict on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best
-trials holding it more than 15 % away, and its profile there, score worse on other draws). A second table
-takes the knobs the renders see together (COMBINATIONS, then any other pair the report judges) and whether the
-report's *moves with* names each pair, rising together for a ratio and falling for a product, and pins what the
+--minutes, and the table compares each knob's calibrated value with the truth beside the report's verdict
+on whether the chips pin it (RUN/calibrate/sensitivity.json: moved alone, and the best trials holding it
+more than 15 % away, and its profile there, score worse on other draws). A second table takes the knobs
+the renders see together (COMBINATIONS, then any other pair the report judges) and whether the report's
+*moves with* names each pair, rising together for a ratio and falling for a product, and pins what the
 pair makes together (RUN/calibrate/together.json). Rerunning continues the calibration and writes its report
 again.
 """
@@ -45,15 +46,14 @@ def main() -> int:
     p.add_argument("--table-only", action="store_true", help="print the tables of a finished run, calibrating no more")
     args = p.parse_args()
 
+    from sasmi.errors import SasmiError
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
     from sasmi.realism.fit_scene import preset_toml
     from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, centre, check_knobs, start_values
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.scene.preset import Preset, load_preset
 
-    from sasmi.errors import SasmiError
-
-    params = DEFAULT_KNOBS if args.params == "default" else tuple(n.strip() for n in args.params.split(",") if n)
+    params = DEFAULT_KNOBS if args.params == "default" else tuple(n.strip() for n in args.params.split(",") if n.strip())
     try:
         check_knobs(params)
     except SasmiError as e:
