@@ -53,7 +53,8 @@ def main() -> int:
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.scene.preset import Preset, load_preset
 
-    params = DEFAULT_KNOBS if args.params == "default" else tuple(n.strip() for n in args.params.split(",") if n.strip())
+    named = tuple(n.strip() for n in args.params.split(",") if n.strip())
+    params = DEFAULT_KNOBS if args.params == "default" else named
     try:
         check_knobs(params)
     except SasmiError as e:
