@@ -34,8 +34,10 @@ def _bbox(pixels: np.ndarray) -> tuple[int, int, int, int] | None:
     return int(cols.min()), int(rows.min()), int(cols.max()) + 1, int(rows.max()) + 1
 
 
-def chip_label(scene: Scene, visible: np.ndarray, owner: np.ndarray, size: int, index: int = 0) -> ChipLabel:
-    """The scene's sampled parameters plus, per target, its pixel centre, boxes (col0, row0, col1, row1) and geometry."""
+def chip_label(scene: Scene, visible: np.ndarray, owner: np.ndarray, size: int, index: int = 0,
+               floor_rocks: tuple[tuple[float, float, float], ...] | None = None) -> ChipLabel:
+    """The scene's sampled parameters plus, per target, its pixel centre, boxes (col0, row0, col1, row1) and geometry;
+    `floor_rocks`: the floor's, when the caller has drawn them (`clutter_labels`)."""
     chip = scene.sonar.chip_size
     params = scene_to_dict(scene)
     targets = tuple(
@@ -45,10 +47,12 @@ def chip_label(scene: Scene, visible: np.ndarray, owner: np.ndarray, size: int, 
                     visible_pixels=int((visible == k).sum()), shadow_pixels=int((owner == k).sum()),
                     geometry={**target_geometry(params["sonar"], t["x"], t["y"]), "heading": t["yaw"]})
         for k, t in enumerate(params.pop("targets")))
-    return ChipLabel(index=index, size=size, scene=params, targets=targets, clutter=clutter_labels(scene, size))
+    return ChipLabel(index=index, size=size, scene=params, targets=targets,
+                     clutter=clutter_labels(scene, size, floor_rocks))
 
 
-def clutter_labels(scene: Scene, size: int) -> tuple[dict, ...]:
+def clutter_labels(scene: Scene, size: int, floor_rocks: tuple[tuple[float, float, float], ...] | None = None
+                   ) -> tuple[dict, ...]:
     """One record per rock: pixel centre (col, row), radius (px) and box (col0, row0, col1, row1), clipped to the chip.
 
     A rock is a Gaussian bump of height r and sigma r / 2 (sasmi.render.seafloor). Its label
@@ -56,11 +60,13 @@ def clutter_labels(scene: Scene, size: int) -> tuple[dict, ...]:
     still brightens the floor by a third at a 10 deg grazing angle; at r (2 sigma) the slope
     is 0.5 and the facet turned towards the track is among the brightest pixels of the chip.
     The box holds the raised pixels and the bright facet; the rock's shadow is not in it.
+    `floor_rocks`: the rocks (x, y, radius in m) of the scene's floor, when it was made (drawing them alone costs a
+    millisecond: its rough surface's noise comes first).
     """
     chip = scene.sonar.chip_size
     per_metre = size / chip
     out = []
-    for x, y, r in rocks(scene.seafloor, chip, scene.seed):
+    for x, y, r in rocks(scene.seafloor, chip, scene.seed) if floor_rocks is None else floor_rocks:
         col, row = (x + chip / 2) * per_metre - 0.5, (y + chip / 2) * per_metre - 0.5
         radius = ROCK_EXTENT * r / 2 * per_metre
         box = (max(0, math.floor(col + 0.5 - radius)), max(0, math.floor(row + 0.5 - radius)),

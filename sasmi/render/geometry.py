@@ -48,6 +48,7 @@ class Geometry:
     beam_width: float  # deg, where the falloff starts
     emitter_intensity: float  # radiant intensity per emitter, exposure folded in
     broadside: bool = False  # sonar.aperture_angle > 0: the beams' falloff shapes the lighting of the chip
+    rocks: tuple[tuple[float, float, float], ...] = ()  # (x, y, radius) in m: the floor's rocks, for the labels
 
     @property
     def beam(self) -> tuple | None:
@@ -59,6 +60,13 @@ class Geometry:
         """What must stay equal for a compiled renderer to be updated in place."""
         return (self.size, len(self.floor.vertices), self.floor.cos_power, len(self.emitter_positions),
                 tuple((len(t.vertices), len(t.faces), t.cos_power) for t in self.targets))
+
+
+def scene_structure(scene: Scene) -> tuple:
+    """What `Geometry.structure` depends on, read from the scene without building it: chips with equal
+    structures render as in-place updates of one loaded Mitsuba scene (built-in shapes are padded alike)."""
+    targets = tuple((t.mesh if t.shape == "mesh" else "", t.backscatter) for t in scene.targets)
+    return scene.sonar.emitters, scene.seafloor.backscatter, targets
 
 
 def grid_faces(n: int) -> np.ndarray:
@@ -101,26 +109,41 @@ def _load_mesh_file(path: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.uint32)
 
 
+@lru_cache(maxsize=None)
+def _primitive(shape: str) -> tuple[np.ndarray, np.ndarray]:
+    """A unit cylinder (radius 1, height 1, axis z), sphere (radius 1) or cube (side 1), centred at the origin:
+    trimesh builds one in about a millisecond, a copy scaled to each target costs microseconds."""
+    import trimesh
+
+    if shape == "cylinder":
+        m = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=CYLINDER_SECTIONS)
+    elif shape == "sphere":
+        m = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)
+    else:
+        m = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    v, f = np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.uint32)
+    v.flags.writeable = f.flags.writeable = False  # shared by every call
+    return v, f
+
+
 def _unit_shape(t: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
     """Target mesh in metres, axis along +x for lying shapes (cylinder, box and boulder length), lowest point at z = 0."""
     import trimesh
 
     if t.shape == "cylinder":
-        m = trimesh.creation.cylinder(radius=t.radius, height=t.length, sections=CYLINDER_SECTIONS)
-        m.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
-        v, f = m.vertices, m.faces
+        v, f = _primitive("cylinder")
+        v = (v * [t.radius, t.radius, t.length])[:, [2, 1, 0]] * [1, 1, -1]  # a quarter turn about y: z -> x
     elif t.shape == "sphere":
-        m = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=t.radius)
-        v, f = m.vertices, m.faces
+        v, f = _primitive("sphere")
+        v = v * t.radius
     elif t.shape == "cone":
-        m = trimesh.creation.cylinder(radius=t.radius, height=t.length, sections=CYLINDER_SECTIONS)
-        v = m.vertices.copy()
+        v, f = _primitive("cylinder")
         top = v[:, 2] > 0
+        v = v * [t.radius, t.radius, t.length]
         v[top, :2] *= t.radius_top / t.radius  # frustum: shrink the top ring
-        f = m.faces
     elif t.shape == "box":
-        m = trimesh.creation.box(extents=[t.length, t.width, t.height])
-        v, f = m.vertices, m.faces
+        v, f = _primitive("box")
+        v = v * [t.length, t.width, t.height]
     elif t.shape == "boulder":
         v, f = _boulder(t)
     elif t.shape == "torus":  # a tyre lying flat: the ring in the seabed's plane
@@ -142,10 +165,7 @@ def _boulder(t: Target) -> tuple[np.ndarray, np.ndarray]:
     """A rock or a heap of debris: a sphere whose radius varies by smooth random bumps at two scales, then
     stretched to length x width x height. Its bumps are seeded by its size alone, so moving, turning or
     burying a boulder (as a differentiable render or a pose sweep does) keeps its shape."""
-    import trimesh
-
-    m = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)  # as many vertices as a sphere
-    directions = np.asarray(m.vertices, dtype=np.float64)
+    directions, faces = _primitive("sphere")  # as many vertices as a sphere
     seed = np.frombuffer(np.array([t.length, t.width, t.height, t.lumpiness]).tobytes(), dtype=np.uint32)
     rng = np.random.default_rng(seed)
     bumps = np.zeros(len(directions))
@@ -157,7 +177,7 @@ def _boulder(t: Target) -> tuple[np.ndarray, np.ndarray]:
     bumps /= max(np.abs(bumps).max(), 1e-12)  # in [-1, 1]: the radius stays in 1 +- lumpiness, above 0
     v = directions * (1.0 + t.lumpiness * bumps)[:, None]
     v = (v - (v.max(0) + v.min(0)) / 2) / (v.max(0) - v.min(0)) * [t.length, t.width, t.height]
-    return v, np.asarray(m.faces)
+    return v, faces
 
 
 def check_scene(scene: Scene) -> None:
@@ -292,4 +312,5 @@ def build_geometry(scene: Scene, size: int) -> Geometry:
         beam_width=0.75 * cone,
         emitter_intensity=s.intensity * scene.post.gain * exposure(positions, floor.cos_power, beam),
         broadside=broadside,
+        rocks=seabed.rocks,
     )

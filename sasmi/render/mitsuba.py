@@ -196,7 +196,7 @@ class Renderer:
         if scene.sonar.slant_range:
             return self._render_slant(scene, g, radiance, maps, visible, owner, hits[1].reshape(self.size, self.size))
         return Rendered(image=postprocess(radiance, maps), mask=class_mask(visible, owner),
-                        label=chip_label(scene, visible, owner, self.size),
+                        label=chip_label(scene, visible, owner, self.size, floor_rocks=g.rocks),
                         instances=instance_ids(visible), shadows=instance_ids(owner))
 
     def _render_slant(self, scene: Scene, g: Geometry, radiance: np.ndarray, maps, visible, owner,
@@ -206,7 +206,7 @@ class Renderer:
         m = slant_map(g, heights)
         image = postprocess(to_slant(radiance * gain, m), (np.ones_like(gain), speckle, offset))
         visible, owner = labels_to_slant(visible, owner, m)
-        label = chip_label(scene, visible, owner, self.size)
+        label = chip_label(scene, visible, owner, self.size, floor_rocks=g.rocks)
         unit = 2.0 / scene.sonar.chip_size
         targets = tuple(replace(t, pixel_centre=(float(m.column(t.params["x"] * unit, 0.0)), t.pixel_centre[1]))
                         for t in label.targets)

@@ -92,7 +92,7 @@ def write_shard(job: RenderJob, k: int, threads: int | None = None) -> int:
 
 def render_shards(job: RenderJob, progress: bool = True) -> Path:
     """Render this job's tar shards into job.out/shards (resuming, beside other processes); returns job.out."""
-    job = prepare(job)
+    job, _ = prepare(job)
     (job.out / "shards").mkdir(exist_ok=True)
     claims = Claims(job.out / "claims")
     mine = range(job.shard[0], shard_count(job.count, job.per_shard), job.shard[1])

@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from sasmi import __version__
 from sasmi.renderset.claims import Claims
+from sasmi.renderset.order import RENDER_WINDOW, grouped
 from sasmi.errors import SasmiError
 from sasmi.images import FORMATS, TEMPORARIES, check_room, write_gray, write_text
 from sasmi.labels import ChipLabel, categories_of, read_labels
@@ -210,15 +211,19 @@ def check_run_record(job: RenderJob, identity: dict) -> None:
         raise SasmiError(f"{job.out}: holds a render set made with other settings; choose another --out")
 
 
-def prepare(job: RenderJob, identity: dict | None = None) -> RenderJob:
-    """Check the job and every scene it will draw, then the run record; nothing is written before."""
-    from sasmi.render.geometry import check_scene
+def prepare(job: RenderJob, identity: dict | None = None) -> tuple[RenderJob, dict[int, tuple]]:
+    """Check the job and every scene it will draw, then the run record; nothing is written before.
+    Returns the job and each scene's structure (`sasmi.render.geometry.scene_structure`)."""
+    from sasmi.render.geometry import check_scene, scene_structure
 
     job = job.validate()
+    structures = {}
     for index in job.indices():
-        check_scene(job.preset.sample(job.seed, index))
+        scene = job.preset.sample(job.seed, index)
+        check_scene(scene)
+        structures[index] = scene_structure(scene)
     check_run_record(job, identity or {})
-    return job
+    return job, structures
 
 
 def _temp_files(out: Path) -> dict[int, list[Path]]:
@@ -253,7 +258,8 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     indices = job.indices()
     todo = [i for i in indices if not is_complete(job.out, i, job.image_format)]
     check_room(job.out, len(todo) * chip_bytes(job.size, job.image_format), f"{len(todo)} chips")
-    job = prepare(job, identity)
+    job, structures = prepare(job, identity)
+    todo = grouped(todo, structures, batch if transform else RENDER_WINDOW)
     claims = Claims(job.out / "claims")
     temps = _temp_files(job.out)
 

@@ -9,6 +9,7 @@ import pytest
 from sasmi.render.mitsuba import Renderer
 from sasmi.errors import SasmiError
 from sasmi.render.annotate import MASK_SHADOW
+from sasmi.render.seafloor import rocks, surface
 from sasmi.scene.model import Post, Scene, Seafloor, Sonar, Target
 
 QUIET = Post(speckle_looks=0.0, noise_std=0.0)
@@ -37,6 +38,13 @@ def test_the_seafloor_is_the_same_at_every_size(seed):
     relative = np.abs(block - coarse).mean() / coarse.mean()
     assert r > 0.9 and relative < 0.25, (r, relative)
     assert abs(block.mean() / coarse.mean() - 1) < 0.03
+
+
+@pytest.mark.parametrize("floor", [rough_floor().seafloor, Seafloor(rms_height=0.0, rocks=3)])
+def test_the_rocks_drawn_for_a_label_are_the_rendered_floors(floor):
+    """A render labels the rocks of the floor it built; a label made without the floor draws them alone."""
+    assert len(surface(floor, 20.0, 7).rocks) == floor.rocks
+    assert rocks(floor, 20.0, 7) == surface(floor, 20.0, 7).rocks
 
 
 # -- sonar physics options: each test fails when its option is ignored -----------------

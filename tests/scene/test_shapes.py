@@ -1,5 +1,5 @@
-"""The box, torus and boulder target shapes: closed meshes of the asked size, rendered with masks, labels and burial
-that make sense, and the same image in Mitsuba and POV-Ray."""
+"""The target shapes are closed meshes of the asked size; the box, torus and boulder render with masks, labels and
+burial that make sense, and the same image in Mitsuba and POV-Ray."""
 from __future__ import annotations
 
 import dataclasses
@@ -30,16 +30,25 @@ def scene_with(target: Target) -> Scene:
 
 
 @pytest.mark.parametrize("target, extent", [
+    (Target(shape="cylinder", radius=0.3, length=2.0), (2.0, 0.6, 0.6)),  # lying along x
+    (Target(shape="sphere", radius=0.4), (0.8, 0.8, 0.8)),
+    (Target(shape="cone", radius=0.5, radius_top=0.2, length=0.9), (1.0, 1.0, 0.9)),  # standing: length is its height
     (BOX, (1.6, 0.8, 0.6)),
     (TORUS, (1.3, 1.3, 0.3)),  # 2 (R + r) across, 2 r high
     (BOULDER, (1.6, 1.2, 0.8)),
 ])
-def test_new_shapes_are_closed_meshes_of_the_asked_size(target, extent):
+def test_shapes_are_closed_meshes_of_the_asked_size(target, extent):
     v, f = _unit_shape(dataclasses.replace(target, yaw=0.0), "targets[0]")
     mesh = trimesh.Trimesh(v, f, process=False)
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0  # outward faces: lit from outside
     np.testing.assert_allclose(v.max(0) - v.min(0), extent, atol=1e-6)
     assert v[:, 2].min() == 0.0  # stands on the floor
+
+
+def test_a_cone_narrows_to_its_top_radius():
+    v, _ = _unit_shape(Target(shape="cone", radius=0.5, radius_top=0.2, length=0.9), "targets[0]")
+    radial = np.hypot(v[:, 0], v[:, 1])
+    np.testing.assert_allclose([radial[v[:, 2] == 0].max(), radial[v[:, 2] == v[:, 2].max()].max()], [0.5, 0.2])
 
 
 def test_torus_is_a_ring_lying_flat():
