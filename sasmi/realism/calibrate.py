@@ -132,11 +132,18 @@ def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 1
 
 
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
-    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are."""
+    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are; rendered grouped by
+    structure (`sasmi.renderset.order`), so the renderer loads a scene per structure, not per change."""
+    from sasmi.render.geometry import scene_structure
     from sasmi.render.mitsuba import render
+    from sasmi.renderset.order import grouped
 
-    images = [render(preset.sample(seed, i), cfg.size, cfg.spp).image for i in range(count)]
-    return (np.round(np.clip(np.stack(images), 0, 1) * 255) / 255).astype(np.float32)
+    scenes = [preset.sample(seed, i) for i in range(count)]
+    order = grouped(list(range(count)), {i: scene_structure(s) for i, s in enumerate(scenes)}, count)
+    images = np.empty((count, cfg.size, cfg.size), dtype=np.float32)
+    for i in order:
+        images[i] = render(scenes[i], cfg.size, cfg.spp).image
+    return (np.round(np.clip(images, 0, 1) * 255) / 255).astype(np.float32)
 
 
 def medians(images: np.ndarray) -> dict[str, float]:
