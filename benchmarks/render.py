@@ -135,20 +135,21 @@ def peak_rss_mb(count: int, size: int) -> tuple[float, float]:
     return kb / 1024, seconds
 
 
-def command_seconds(command: str, count: int, size: int, workers: int) -> float:
-    """Wall seconds of `sasmi COMMAND` (render, or generate with the shipped files) making `count` chips."""
+def command_seconds(command: str, count: int, size: int, workers: int, repo: Path = REPO) -> float:
+    """Wall seconds of `sasmi COMMAND` (render, or generate with the shipped files) making `count` chips, run in
+    `repo` (whose package `python -m sasmi` imports)."""
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "sasmi", command, str(PRESET), "--count", str(count), "--out",
-                        str(Path(tmp) / "set"), "--size", str(size), "--workers", str(workers)],
-                       capture_output=True, text=True, check=True, cwd=REPO)
+        subprocess.run([sys.executable, "-m", "sasmi", command, str(repo / PRESET.relative_to(REPO)), "--count",
+                        str(count), "--out", str(Path(tmp) / "set"), "--size", str(size), "--workers", str(workers)],
+                       capture_output=True, text=True, check=True, cwd=repo)
         return time.perf_counter() - start
 
 
-def throughput_ms(command: str, workers: int, size: int, short: int, long: int) -> float:
+def throughput_ms(command: str, workers: int, size: int, short: int, long: int, repo: Path = REPO) -> float:
     """ms per chip of `sasmi COMMAND --workers N`: (time of `long` chips - time of `short`) / (long - short)."""
-    return (command_seconds(command, long, size, workers) - command_seconds(command, short, size, workers)) \
-        / (long - short) * 1000
+    seconds = [command_seconds(command, count, size, workers, repo) for count in (long, short)]
+    return (seconds[0] - seconds[1]) / (long - short) * 1000
 
 
 def compile_for_avx2() -> str:

@@ -71,11 +71,11 @@ def run(args: argparse.Namespace) -> int:
     floors = FloorsAhead(floor_of, job.indices(), args.batch) if relabel else None
 
     def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
-        if relabel:
+        if floors is not None:
             images = np.stack([on_floor(image, mask, floors(i)) for image, mask, i in zip(images, masks, indices)])
         # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
         translated = translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
-        if relabel:
+        if floors is not None:
             floors.draw_after(max(indices))
         return translated
 

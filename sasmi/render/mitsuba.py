@@ -14,7 +14,8 @@ meshes are padded to a common size (`padded`) so that a chip of another kind, li
 spot of another cone angle, is an update too, not a new scene. An update still rebuilds the
 whole scene's BVH (Mitsuba commits every shape again at Embree's high build quality): a floor
 behind an instance rebuilds alone and faster but traces slower, and padding the target count
-to one structure makes every update dearer, so neither is done (benchmarks/render.py times it).
+to one structure makes every update dearer, so neither is done (benchmarks/render.py times it). A render
+set, or a calibration's trial, renders its chips grouped by structure instead (sasmi.renderset.order).
 """
 from __future__ import annotations
 
