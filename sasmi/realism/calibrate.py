@@ -132,17 +132,10 @@ def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 1
 
 
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
-    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are; rendered grouped by
-    structure (`sasmi.renderset.order`), so the renderer loads a scene per structure, not per change."""
-    from sasmi.render.geometry import scene_structure
-    from sasmi.render.mitsuba import render
-    from sasmi.renderset.order import grouped
+    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are."""
+    from sasmi.renderset.order import render_grouped
 
-    scenes = [preset.sample(seed, i) for i in range(count)]
-    order = grouped(list(range(count)), {i: scene_structure(s) for i, s in enumerate(scenes)}, count)
-    images = np.empty((count, cfg.size, cfg.size), dtype=np.float32)
-    for i in order:
-        images[i] = render(scenes[i], cfg.size, cfg.spp).image
+    images = render_grouped([preset.sample(seed, i) for i in range(count)], cfg.size, cfg.spp)
     return (np.round(np.clip(images, 0, 1) * 255) / 255).astype(np.float32)
 
 

@@ -6,6 +6,13 @@ more. A chip's output depends on its index alone (to float32 rounding), so the o
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from sasmi.scene.model import Scene
+
 RENDER_WINDOW = 64  # untransformed chips are grouped by structure this many at a time (a transform's: a batch)
 
 
@@ -25,3 +32,15 @@ def grouped(todo: list[int], structures: dict[int, tuple], window: int) -> list[
         ordered += sorted(run, key=lambda index: rank[structures[index]])  # stable: index order within a group
         last = structures[ordered[-1]]
     return ordered
+
+
+def render_grouped(scenes: list[Scene], size: int, spp: int) -> np.ndarray:
+    """(N, size, size) float32: the scenes' images in their order, rendered grouped by structure."""
+    from sasmi.render.geometry import scene_structure
+    from sasmi.render.mitsuba import render
+
+    images = np.empty((len(scenes), size, size), dtype=np.float32)
+    indices = list(range(len(scenes)))
+    for i in grouped(indices, {i: scene_structure(scene) for i, scene in enumerate(scenes)}, len(scenes)):
+        images[i] = render(scenes[i], size, spp).image
+    return images
