@@ -41,6 +41,6 @@ def render_grouped(scenes: list[Scene], size: int, spp: int) -> np.ndarray:
 
     images = np.empty((len(scenes), size, size), dtype=np.float32)
     indices = list(range(len(scenes)))
-    for i in grouped(indices, {i: scene_structure(scene) for i, scene in enumerate(scenes)}, len(scenes)):
+    for i in grouped(indices, {i: scene_structure(scene) for i, scene in enumerate(scenes)}, max(len(scenes), 1)):
         images[i] = render(scenes[i], size, spp).image
     return images
