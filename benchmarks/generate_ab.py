@@ -2,10 +2,11 @@
 at this checkout, run in turn, so that a machine whose speed drifts by several per cent from run to run compares
 them fairly: the median of the pairs' ratios, and in how many pairs this checkout was faster.
 
-    .venv/bin/python benchmarks/generate_ab.py REV [--pairs 3] [--generate 50 350]
+    .venv/bin/python benchmarks/generate_ab.py REV [--pairs 3] [--generate 50 350] [--workers 1]
 
 REV is checked out into a temporary git worktree; both run with this checkout's Python environment
-(`python -m sasmi` imports the package of the folder it runs in).
+(`python -m sasmi` imports the package of the folder it runs in). --workers N runs this checkout's
+`generate --workers N` against REV's one process.
 """
 from __future__ import annotations
 
@@ -26,8 +27,9 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--generate", type=int, nargs=2, default=[50, 350], metavar=("SHORT", "LONG"),
                     help="chips of the short and the long run (their difference is timed)")
+    ap.add_argument("--workers", type=int, default=1, help="this checkout's `generate --workers` (REV: 1)")
     args = ap.parse_args()
-    here = "this checkout"
+    here = "this checkout" + (f" --workers {args.workers}" if args.workers > 1 else "")
     rates: dict[str, list[float]] = {args.rev: [], here: []}
     with tempfile.TemporaryDirectory() as tmp:
         other = Path(tmp) / "tree"
@@ -37,8 +39,8 @@ def main() -> None:
             sys.exit(f"generate_ab.py: {args.rev}: cannot check it out ({added.stderr.strip()})")
         try:
             for k in range(args.pairs):
-                for name, tree in ((args.rev, other), (here, REPO)):
-                    rates[name].append(1000 / throughput_ms("generate", 1, 128, *args.generate, repo=tree))
+                for name, tree, workers in ((args.rev, other, 1), (here, REPO, args.workers)):
+                    rates[name].append(1000 / throughput_ms("generate", workers, 128, *args.generate, repo=tree))
                     print(f"pair {k + 1}, {name}: {rates[name][-1]:.2f} chips/s", flush=True)
         finally:
             subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(other)], capture_output=True)

@@ -1,8 +1,8 @@
-"""Chips/s of `sasmi render` in one process vs a local Dask cluster (`--workers N`).
+"""Chips/s of `sasmi render` in one process vs `--workers N` processes.
 
 Each configuration runs the real CLI in a fresh subprocess into a fresh folder, so the
 figures include everything a user waits for. Two rates per run:
-- overall: chips / wall time of the command (interpreter, Dask cluster start, kernel compile);
+- overall: chips / wall time of the command (interpreter, process starts, kernel compile);
 - steady: (chips - 1) / (time between the first and the last chip's labels file), i.e. the
   rate once every worker is warm (what matters for large sets).
 

@@ -3,4 +3,5 @@ import sys
 
 from sasmi.cli.main import main
 
-sys.exit(main())
+if __name__ == "__main__":  # not when a process that `generate --workers` spawns imports it
+    sys.exit(main())

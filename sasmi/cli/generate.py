@@ -25,8 +25,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                             "was trained at; another size is resampled to it and back)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel")
     p.add_argument("--workers", type=int, default=1,
-                   help="render processes, a local Dask cluster when > 1: they render the next batch while this "
-                        "process translates one (default: 1; on 2 cores 2 was faster on one CPU and slower on another: docs/results.md)")
+                   help="processes, each rendering and translating every N-th scene on cores // N threads "
+                        "(default: 1; on 2 cores 2 make 1.25 × the chips per second: docs/scale.md)")
     p.add_argument("--floors", metavar="DIR",
                    help="lay each render's target and shadow on a real seafloor chip first, as `sasmi fit --floors` "
                         "did for the generator it trained (needs --real); without it, the shipped generator's renders "
@@ -42,11 +42,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
+    job, generator, identity, floor_of, relabel = _setup(args)
+    if job.workers > 1:
+        from functools import partial
 
-    from sasmi.renderset.write import RenderJob, render_set
+        from sasmi.renderset.processes import complete_chips, run_shares
+        from sasmi.renderset.write import missing, prepare
+
+        prepare(job, identity)  # every scene checked and run.json written before any process starts
+        del generator
+        run_shares(partial(_share, args), job.workers, partial(complete_chips, job.out), job.count, "generate")
+        unfinished = missing(job.out, job.count, job.image_format)
+        if unfinished:  # claimed by another command rendering into the same folder
+            print(f"{len(unfinished)} chips of {args.out} are another process's to finish; rerun the same command "
+                  "once it stops if any are left")
+            return 0
+    else:
+        _generate(args, job, generator, identity, floor_of, relabel)
+    which = f"the generator {args.generator}" if args.generator else "the shipped generator"
+    print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}, by {which}")
+    return 0
+
+
+def _setup(args: argparse.Namespace):
+    """Check every flag and load what the chips need: (job, generator, identity, floor_of, relabel)."""
+    from sasmi.renderset.write import RenderJob
     from sasmi.errors import SasmiError
-    from sasmi.realism.floors import FloorsAhead, on_floor
     from sasmi.images import list_images
     from sasmi.scene.preset import load_preset
 
@@ -59,13 +80,23 @@ def run(args: argparse.Namespace) -> int:
             raise SasmiError(f"{flag} {folder}: no image (png, jpg, tif, tiff, npy) in it")
     preset = load_preset(args.preset)
     generator = generator_from(args)
-    from sasmi.gan.translate import translate
     job = RenderJob(preset=preset, out=args.out, count=args.count, seed=args.seed,
                     size=args.size or generator.image_size, spp=args.spp, workers=args.workers).validate()
     identity = {"generator": str(Path(args.generator or generator.checkpoint).resolve()),
                 "generator_sha256": hashlib.sha256(generator.checkpoint.read_bytes()).hexdigest()}
     recorded, floor_of, relabel = floor_source(args, job.size)
     identity.update(recorded)
+    return job, generator, identity, floor_of, relabel
+
+
+def _generate(args: argparse.Namespace, job, generator, identity: dict, floor_of, relabel,
+              progress: bool = True) -> None:
+    """Render and translate the job's scenes in this process."""
+    import numpy as np
+
+    from sasmi.gan.translate import translate
+    from sasmi.realism.floors import FloorsAhead, on_floor
+    from sasmi.renderset.write import render_set
 
     # once a batch is translated, the next batch's floors are drawn while it is written and the next renders
     floors = FloorsAhead(floor_of, job.indices(), args.batch) if relabel else None
@@ -73,20 +104,35 @@ def run(args: argparse.Namespace) -> int:
     def transform(images, masks, indices):  # (B, H, W) in [0, 1], (B, H, W) uint8 -> (B, H, W) in [0, 1]
         if floors is not None:
             images = np.stack([on_floor(image, mask, floors(i)) for image, mask, i in zip(images, masks, indices)])
-        # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or worker
+        # a tone style's code per chip from (--seed, scene index), as its scene: the same in any batch or process
         translated = translate(generator, images, args.batch, seeds=[args.seed * 2 ** 32 + i for i in indices])
         if floors is not None:
             floors.draw_after(max(indices))
         return translated
 
     try:
-        render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel)
+        render_set(job, transform=transform, identity=identity, batch=args.batch, relabel=relabel, progress=progress)
     finally:
         if floors is not None:
             floors.close()
-    which = f"the generator {args.generator}" if args.generator else "the shipped generator"
-    print(f"wrote {args.count} translated chips ({job.size} px) with masks and labels to {args.out}, by {which}")
-    return 0
+
+
+def _share(args: argparse.Namespace, share: int, shares: int) -> None:
+    """One process of `--workers N`: the scenes with index % N == share, rendered and translated on
+    cores // N threads (torch's: --threads where given)."""
+    from dataclasses import replace
+
+    from sasmi.renderset.processes import in_share
+    from sasmi.renderset.threads import local_threads
+
+    threads = local_threads(shares)
+    args = argparse.Namespace(**{**vars(args), "workers": 1, "threads": args.threads or threads})
+
+    def body() -> None:
+        job, generator, identity, floor_of, relabel = _setup(args)
+        _generate(args, replace(job, shard=(share, shares)), generator, identity, floor_of, relabel, progress=False)
+
+    in_share("generate", threads, body)
 
 
 def floor_source(args: argparse.Namespace, size: int):

@@ -250,7 +250,7 @@ class FloorsAhead:
     to be drawn while the next chips render. numpy's FFTs and sorts, most of a drawn floor's time, release the GIL,
     and the render leaves core time idle where the generator leaves none. The same floors as floor_of(i) called
     here; a chip not drawn ahead is drawn here, and one drawn ahead but never asked for is dropped once `ahead`
-    chips behind (a resumed run skips the chips it has, and render workers finish in any order)."""
+    chips behind (a resumed run skips the chips it has)."""
 
     def __init__(self, floor_of, order: list[int], ahead: int):
         from concurrent.futures import ThreadPoolExecutor

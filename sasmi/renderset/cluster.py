@@ -53,12 +53,10 @@ def _on_worker(task: Callable, job, item, threads: int | None, kwargs: dict):
 
 
 def stream(client, task: Callable, job, items: list, claim: Callable[[object], bool], threads: int | None,
-           ahead: int = 0, **kwargs) -> Iterator[tuple[object, object]]:
+           **kwargs) -> Iterator[tuple[object, object]]:
     """(item, task(job, item, threads=threads, **kwargs)) for each item that `claim` grants, as tasks finish.
 
-    `ahead` more tasks stay in flight, so that workers keep busy while the caller spends time on the
-    results it already has (a generator translating a batch). An error in a task cancels the rest and is
-    raised here (claims are the caller's to release)."""
+    An error in a task cancels the rest and is raised here (claims are the caller's to release)."""
     from distributed import as_completed
 
     job_future = client.scatter(job, broadcast=True, hash=False)
@@ -67,7 +65,7 @@ def stream(client, task: Callable, job, items: list, claim: Callable[[object], b
     item_of: dict = {}
 
     def window() -> int:
-        return TASKS_PER_THREAD * max(1, sum(client.nthreads().values())) + ahead
+        return TASKS_PER_THREAD * max(1, sum(client.nthreads().values()))
 
     def top_up(limit: int) -> None:
         while running.count() < limit:

@@ -140,13 +140,10 @@ def render_chip(job: RenderJob, index: int, write: bool = True, threads: int | N
 Task = Callable[..., object]
 
 
-def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object], bool], busy_here: int = 0,
-              ahead: int = 0, **kwargs) -> Iterator:
+def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object], bool], **kwargs) -> Iterator:
     """(item, task(job, item, threads=..., **kwargs)) for each item of `items` that `claim` grants, in
     completion order: in this process (--workers 1), on a local Dask cluster (--workers N) or on the
-    cluster at --scheduler. `busy_here`: thread pools of this process busy meanwhile (a generator),
-    which local workers leave their share of the cores to; `ahead`: tasks kept in flight beyond the
-    workers' own (sasmi.renderset.cluster.stream)."""
+    cluster at --scheduler."""
     if job.scheduler is None and (job.workers == 1 or len(items) <= 1):  # a cluster would only cost its start
         for item in items:
             if claim(item):
@@ -156,10 +153,10 @@ def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object],
     from sasmi.renderset.threads import local_threads
 
     workers = min(job.workers, len(items))
-    threads = None if job.scheduler else local_threads(workers + busy_here)
+    threads = None if job.scheduler else local_threads(workers)
     remote = replace(job, out=job.out.resolve())  # workers may run elsewhere, in another folder
     with dask_client(job.scheduler, workers) as client:
-        yield from stream(client, task, remote, items, claim, threads, ahead, **kwargs)
+        yield from stream(client, task, remote, items, claim, threads, **kwargs)
 
 
 # -- the run record -------------------------------------------------------------------------
@@ -255,6 +252,9 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
     """
     if relabel is not None and transform is None:
         raise ValueError("render_set: relabel goes with a transform (untransformed chips are written by the workers)")
+    if transform is not None and (job.workers > 1 or job.scheduler):
+        raise ValueError("render_set: a transform runs in this process, so its job has one worker "
+                         "(sasmi.renderset.processes runs several whole processes)")
     indices = job.indices()
     todo = [i for i in indices if not is_complete(job.out, i, job.image_format)]
     check_room(job.out, len(todo) * chip_bytes(job.size, job.image_format), f"{len(todo)} chips")
@@ -273,16 +273,9 @@ def render_set(job: RenderJob, transform: Transform | None = None, identity: dic
             path.unlink(missing_ok=True)
         return True
 
-    beside = transform is not None and job.workers > 1  # the driver's generator runs beside local workers
-    if beside:
-        from sasmi.renderset.threads import share_torch_threads
-
-        share_torch_threads(job.workers + 1)
     with tqdm(total=len(indices), initial=len(indices) - len(todo), unit="img", desc="render",
               disable=not progress, dynamic_ncols=True) as bar, claims.kept_alive():
-        # while the driver translates one batch, the workers render the next
-        stream = run_tasks(job, render_chip, todo, claim, busy_here=int(beside), ahead=batch if transform else 0,
-                           write=transform is None)
+        stream = run_tasks(job, render_chip, todo, claim, write=transform is None)
         try:
             while chunk := list(itertools.islice(stream, batch if transform else 1)):
                 if transform is not None:

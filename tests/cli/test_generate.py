@@ -193,3 +193,15 @@ def test_generate_with_a_seabeds_file_and_bad_ones(tmp_path, generator_runs, cap
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err
         assert not (tmp_path / "bad").exists()
+
+
+def test_generate_in_two_processes_writes_what_one_process_writes(tmp_path, capsys):
+    args = ["generate", str(REPO / "scenes" / "cylinder_chip.toml"), "--count", "5", "--size", "32", "--spp", "2"]
+    assert main([*args, "--out", str(tmp_path / "one")]) == 0
+    assert main([*args, "--out", str(tmp_path / "two"), "--workers", "2"]) == 0
+    assert "wrote 5 translated chips" in capsys.readouterr().out
+    files = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*") if p.is_file())
+    assert len(files) == 2 + 5 * 5  # run.json, labels.jsonl; per chip its image, three masks and its label
+    for name in files:
+        assert (tmp_path / "two" / name).read_bytes() == (tmp_path / "one" / name).read_bytes(), name
+    assert not (tmp_path / "two" / "claims").exists()

@@ -240,3 +240,18 @@ def test_rocks_are_labelled_clutter_whose_boxes_hold_them(renderer64):
     assert ChipLabel.from_json(record).clutter == clutter
     record.pop("clutter")
     assert ChipLabel.from_json(record).clutter == () and "clutter" not in ChipLabel.from_json(record).to_json()
+
+
+def test_workers_split_a_shard_among_them(tmp_path, capsys):
+    """--workers 2 with --shard 1/2: two processes render scenes 1 and 5, and 3 (shards 1/4 and 3/4), no other."""
+    from sasmi.cli.main import main
+
+    args = ["render", str(REPO / "scenes" / "muscle_paper.toml"), "--count", "6", "--size", "32", "--spp", "2"]
+    assert main([*args, "--out", str(tmp_path / "one"), "--shard", "1/2"]) == 0
+    assert main([*args, "--out", str(tmp_path / "two"), "--shard", "1/2", "--workers", "2"]) == 0
+    assert "3 chips of 6 chips are not complete yet" in capsys.readouterr().out
+    for folder in ("images", "masks", "labels"):
+        names = sorted(p.name for p in (tmp_path / "two" / folder).iterdir())
+        assert [n[:6] for n in names] == ["000001", "000003", "000005"]
+        assert all((tmp_path / "two" / folder / n).read_bytes() == (tmp_path / "one" / folder / n).read_bytes()
+                   for n in names)

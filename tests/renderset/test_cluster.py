@@ -135,18 +135,17 @@ def test_scheduler_addresses_accepted():
         assert scheduler_address(text) == text
 
 
-def test_tasks_ahead_stay_in_flight_while_the_caller_is_busy(scheduler):
-    """`ahead`: a generator translating a batch leaves the workers that many more chips to render meanwhile."""
+def test_tasks_in_flight_keep_every_worker_busy_while_the_caller_is(scheduler):
+    """A few tasks per worker thread stay submitted while the caller holds a result, and every item runs once."""
     from distributed import Client
 
     from sasmi.renderset.cluster import TASKS_PER_THREAD, stream
 
     with Client(scheduler, timeout=START_TIMEOUT_S) as client:
-        for ahead in (0, 5):
-            granted = []
-            results = stream(client, lambda job, item, threads: (job, item * 2), "job", list(range(30)),
-                             lambda i: granted.append(i) is None, None, ahead)
-            first = next(results)
-            assert len(granted) == TASKS_PER_THREAD * 2 + ahead  # two single-threaded workers
-            done = sorted([first, *results])
-            assert done == [(i, ("job", 2 * i)) for i in range(30)] and sorted(granted) == list(range(30))
+        granted = []
+        results = stream(client, lambda job, item, threads: (job, item * 2), "job", list(range(30)),
+                         lambda i: granted.append(i) is None, None)
+        first = next(results)
+        assert len(granted) == TASKS_PER_THREAD * 2  # two single-threaded workers
+        done = sorted([first, *results])
+        assert done == [(i, ("job", 2 * i)) for i in range(30)] and sorted(granted) == list(range(30))
