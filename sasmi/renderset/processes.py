@@ -11,6 +11,8 @@ command resumes every share).
 from __future__ import annotations
 
 import multiprocessing
+import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -21,6 +23,7 @@ from tqdm import tqdm
 from sasmi.errors import SasmiError
 
 POLL_S = 0.5
+STOP_S = 10.0  # a stopped share finishes the chip it is writing in this time, or is killed
 
 
 def in_share(command: str, threads: int, body: Callable[[], None]) -> None:
@@ -69,8 +72,12 @@ def run_shares(work: Callable[[int, int], None], shares: int, done: Callable[[],
                 finished = now
             bar.update(done() - finished)
     finally:
-        for p in processes:
+        # the others end as on Ctrl-C, cleanly (a killed process leaves its semaphores behind); then by force
+        running = [p for p in processes if p.is_alive()]
+        for p in running:
+            os.kill(p.pid, signal.SIGINT)
+        for p in running:
+            p.join(STOP_S)
             if p.is_alive():
-                p.terminate()
-        for p in processes:
-            p.join()
+                p.kill()
+                p.join()

@@ -2,8 +2,8 @@
 
 Dr.Jit's (rendering) and torch's (networks) thread pools spin on every core by default; several
 processes each doing so on a few cores run many times slower than one. Wherever processes
-work at once (local Dask render workers, the processes of `generate --workers`, calibration
-trials), each sizes its pools to its share: cores // processes.
+work at once (the processes of `render --workers` and `generate --workers`, Dask workers,
+calibration trials), each sizes its pools to its share: cores // processes.
 """
 from __future__ import annotations
 

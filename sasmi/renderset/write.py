@@ -142,8 +142,8 @@ Task = Callable[..., object]
 
 def run_tasks(job: RenderJob, task: Task, items: list, claim: Callable[[object], bool], **kwargs) -> Iterator:
     """(item, task(job, item, threads=..., **kwargs)) for each item of `items` that `claim` grants, in
-    completion order: in this process (--workers 1), on a local Dask cluster (--workers N) or on the
-    cluster at --scheduler."""
+    completion order: in this process (workers 1), on a local Dask cluster (workers N) or on the
+    cluster at --scheduler (the commands' --workers N starts whole processes: sasmi.renderset.processes)."""
     if job.scheduler is None and (job.workers == 1 or len(items) <= 1):  # a cluster would only cost its start
         for item in items:
             if claim(item):
