@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="scene i depends only on (seed, i)")
     p.add_argument("--workers", type=int, default=1,
-                   help="processes on this machine, each rendering every N-th scene of this command's on "
+                   help="processes on this machine, each rendering every N-th of this command's scenes on "
                         "cores // N Dr.Jit threads (default: 1; on 2 cores 2 render a 256 px chip in 0.8-0.9 × "
                         "the time of one: docs/scale.md)")
     p.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",

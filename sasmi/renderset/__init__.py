@@ -1,2 +1,2 @@
 """Render sets on disk: written atomically and resumably by any number of processes (write), claims,
-Dask clusters, shards, thread shares and contact sheets."""
+local processes each making a share, Dask clusters, shards, thread shares and contact sheets."""
