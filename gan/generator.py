@@ -295,6 +295,6 @@ def load_generator(run_dir: str | os.PathLike, device: str | torch.device = "cpu
         load_weights(generator, saved, "generator")
     # channels-last convolutions: a 128 px chip in about 17 ms on 2 AVX2 cores, not 24 (outputs within 2e-5)
     generator = generator.to(device, memory_format=torch.channels_last).eval().requires_grad_(False)
-    fold_upsampling(generator.net)  # the up stages at the low resolution: same outputs, translation 0.85 × the time
+    fold_upsampling(generator.net)  # the up stages at the low resolution: same outputs, about 0.85 × the time
     generator.image_size, generator.checkpoint = saved.config["size"], saved.path
     return generator

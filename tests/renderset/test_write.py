@@ -240,3 +240,15 @@ def test_held_claims_are_kept_alive_for_other_hosts(tmp_path, monkeypatch):
         assert not other.take("shard-000000"), "a claim touched meanwhile is alive"
     time.sleep(0.7)
     assert other.take("shard-000000"), "untouched for longer than stale_after: its holder is gone"
+
+
+def test_a_transform_runs_in_one_process_only(tmp_path):
+    from sasmi.renderset.write import RenderJob, render_set
+    from sasmi.scene.preset import load_preset
+
+    preset = load_preset(REPO / "scenes" / "muscle_paper.toml")
+    for job in (RenderJob(preset=preset, out=tmp_path / "a", count=2, size=32, workers=2),
+                RenderJob(preset=preset, out=tmp_path / "b", count=2, size=32, scheduler="tcp://127.0.0.1:1")):
+        with pytest.raises(ValueError, match="one worker"):
+            render_set(job, transform=lambda images, masks, indices: images)
+        assert not job.out.exists()
