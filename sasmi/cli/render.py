@@ -69,7 +69,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_render(args: argparse.Namespace) -> int:
     from sasmi.renderset.write import RenderJob, missing, prepare
     from sasmi.scene.preset import load_preset
-    from sasmi.renderset.shards import missing_shards, shard_count
+    from sasmi.renderset.shards import complete_samples, missing_shards
 
     job = RenderJob(preset=load_preset(args.preset), out=args.out, count=args.count, seed=args.seed,
                     size=args.size, spp=args.spp, image_format=args.image_format, workers=args.workers,
@@ -80,10 +80,9 @@ def run_render(args: argparse.Namespace) -> int:
         from sasmi.renderset.processes import complete_chips, run_shares
 
         prepare(job)  # every scene checked and run.json written before any process starts
-        shards = shard_count(job.count, job.per_shard)
-        done = (partial(complete_chips, job.out) if job.image_format != "wds" else
-                lambda: min(job.count, (shards - len(missing_shards(job))) * job.per_shard))
-        run_shares(partial(_render_share, replace(job, workers=1)), job.workers, done, job.count, "render")
+        done = (partial(complete_chips, job.out, job.shard) if job.image_format != "wds" else
+                partial(complete_samples, job))
+        run_shares(partial(_render_share, replace(job, workers=1)), job.workers, done, len(job.indices()), "render")
     else:
         _render(job)
     if job.image_format == "wds":

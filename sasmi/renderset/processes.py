@@ -41,10 +41,11 @@ def in_share(command: str, threads: int, body: Callable[[], None]) -> None:
         sys.exit(130)
 
 
-def complete_chips(out: Path) -> int:
-    """Chips with their labels file written (the last file of a chip: sasmi.renderset.write.write_one)."""
-    folder = out / "labels"
-    return sum(1 for p in folder.glob("[0-9]*.json")) if folder.is_dir() else 0
+def complete_chips(out: Path, shard: tuple[int, int] = (0, 1)) -> int:
+    """Chips of the shard (I, N) (index % N == I) with their labels file written (the last file of a chip:
+    sasmi.renderset.write.write_one)."""
+    folder, (i, n) = out / "labels", shard
+    return sum(1 for p in folder.glob("[0-9]*.json") if int(p.stem) % n == i) if folder.is_dir() else 0
 
 
 def run_shares(work: Callable[[int, int], None], shares: int, done: Callable[[], int], count: int, what: str,

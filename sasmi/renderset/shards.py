@@ -61,6 +61,12 @@ def shard_complete(job: RenderJob, k: int) -> bool:
     return labels == len(_samples(job, k))
 
 
+def complete_samples(job: RenderJob) -> int:
+    """Samples in the complete tar shards of the job's --shard."""
+    return sum(len(_samples(job, k)) for k in range(job.shard[0], shard_count(job.count, job.per_shard), job.shard[1])
+               if shard_complete(job, k))
+
+
 def missing_shards(job: RenderJob) -> list[int]:
     return [k for k in range(shard_count(job.count, job.per_shard)) if not shard_complete(job, k)]
 
