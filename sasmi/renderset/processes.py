@@ -20,25 +20,29 @@ from typing import Callable
 
 from tqdm import tqdm
 
-from sasmi.errors import SasmiError
+from sasmi.errors import SasmiError, user_error_message
 
 POLL_S = 0.5
 STOP_S = 10.0  # a stopped share finishes the chip it is writing in this time, or is killed
 
 
 def in_share(command: str, threads: int, body: Callable[[], None]) -> None:
-    """Run body() as one share's process, Dr.Jit on `threads` threads: a SasmiError ends it with the
-    command's one line and exit code 2, Ctrl-C (which reaches every process of the terminal) with 130."""
+    """Run body() as one share's process, Dr.Jit on `threads` threads: an error the user can fix ends it
+    with the command's one line and exit code 2 (as `sasmi.cli.main` reports it), Ctrl-C (which reaches
+    every process of the terminal) with 130; any other error with its traceback."""
     from sasmi.render.llvm import import_mitsuba
 
     try:
         import_mitsuba()[1].set_thread_count(threads)
         body()
-    except SasmiError as e:
-        print(f"sasmi {command}: error: {e}", file=sys.stderr)
-        sys.exit(2)
     except KeyboardInterrupt:  # the first process reports it
         sys.exit(130)
+    except Exception as e:
+        message = user_error_message(e)
+        if message is None:
+            raise
+        print(f"sasmi {command}: error: {message}", file=sys.stderr)
+        sys.exit(2)
 
 
 def complete_chips(out: Path, shard: tuple[int, int] = (0, 1)) -> int:

@@ -38,3 +38,20 @@ def test_a_failed_share_stops_the_others_and_is_named(tmp_path):
         run_shares(partial(fail_second, tmp_path), 2, lambda: 0, 4, "test", progress=False)
     assert time.monotonic() - start < 60  # the sleeping share was stopped, not waited for
     assert not (tmp_path / "finished").exists()
+
+
+def test_a_share_reports_what_the_user_can_fix_in_one_line(capsys):
+    import errno
+
+    from sasmi.renderset.processes import in_share
+
+    def full_disk():
+        raise OSError(errno.ENOSPC, "No space left on device", "/out/images/000003.png")
+
+    with pytest.raises(SystemExit) as stopped:
+        in_share("render", 1, full_disk)
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sasmi render: error: ") and "000003.png" in err[0]
+    with pytest.raises(ZeroDivisionError):  # a bug keeps its traceback
+        in_share("render", 1, lambda: 1 / 0)
