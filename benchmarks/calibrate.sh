@@ -1,14 +1,15 @@
 #!/bin/sh
 # The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
 # never saw.
-#   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split, without
-#      and with --variety-weight 1 (the latter, as 2 and 3, calibrating the search's best: --contenders 1);
-#      400 renders of each result against the validation targets:
-#      `sasmi stats --check` and the φ-FID ratio beside 400 renders of the hand-matched cylinder_chip.
+#   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split: as the
+#      command stands, with the plain φ-FID ratio (--plain-fid), and with it and --variety-weight 1 (the last, as
+#      2 and 3, calibrating the search's best: --contenders 1); 400 renders of each result against the validation
+#      targets: `sasmi stats --check` and the φ-FID ratio beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
-#      scene group among themselves; 400 renders against the held-back floors of that sonar.
-#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, without and with
-#      --variety-weight 1; 400 renders of each against the validation targets beside cylinder_chip's own.
+#      scene group among themselves, with the plain φ-FID ratio; 400 renders against the held-back floors of that
+#      sonar.
+#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, as in 1; 400 renders of each
+#      against the validation targets beside cylinder_chip's own.
 #
 #     benchmarks/calibrate.sh [RUNS] [MINUTES] [SONAR]        (defaults: runs 30 sassed)
 set -eu
@@ -26,16 +27,19 @@ post.speckle_cell_track,post.noise_std,post.gain.spread,seafloor.albedo.spread,s
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --out "$RUNS/calibrate-muscle"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
-    --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
-for run in calibrate-muscle calibrate-muscle-variety; do
+    --plain-fid --out "$RUNS/calibrate-muscle-plain"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
+    --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
+for run in calibrate-muscle calibrate-muscle-plain calibrate-muscle-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
 $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
 $SASMI render muscle_paper --count 400 --size 128 --out "$RUNS/muscle-renders"
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-variety/renders" \
-    "$RUNS/cylinder-renders" "$RUNS/muscle-renders" --check || true
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-plain/renders" \
+    "$RUNS/calibrate-muscle-variety/renders" "$RUNS/cylinder-renders" "$RUNS/muscle-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-muscle/evaluate" \
-    --set calibrated="$RUNS/calibrate-muscle/renders" --set variety="$RUNS/calibrate-muscle-variety/renders" \
+    --set calibrated="$RUNS/calibrate-muscle/renders" --set plain="$RUNS/calibrate-muscle-plain/renders" \
+    --set variety="$RUNS/calibrate-muscle-variety/renders" \
     --set cylinder_chip="$RUNS/cylinder-renders" --set muscle_paper="$RUNS/muscle-renders"
 
 # one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
@@ -56,7 +60,7 @@ print(f"{len(rows)} {sonar} chips in {out}")
 PY
 [ -d "$RUNS/$SONAR-split" ] || $SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
-    --chips 16 --minutes "$MINUTES" --contenders 1 --out "$RUNS/calibrate-$SONAR"
+    --chips 16 --minutes "$MINUTES" --contenders 1 --plain-fid --out "$RUNS/calibrate-$SONAR"
 $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
 $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \
@@ -65,12 +69,14 @@ $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/re
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
     --contenders 1 --out "$RUNS/calibrate-cylinder"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
-    --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-cylinder-variety"
-for run in calibrate-cylinder calibrate-cylinder-variety; do
+    --plain-fid --contenders 1 --out "$RUNS/calibrate-cylinder-plain"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
+    --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-cylinder-variety"
+for run in calibrate-cylinder calibrate-cylinder-plain calibrate-cylinder-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" \
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" "$RUNS/calibrate-cylinder-plain/renders" \
     "$RUNS/calibrate-cylinder-variety/renders" "$RUNS/cylinder-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-cylinder/evaluate" \
-    --set calibrated="$RUNS/calibrate-cylinder/renders" --set variety="$RUNS/calibrate-cylinder-variety/renders" \
-    --set cylinder_chip="$RUNS/cylinder-renders"
+    --set calibrated="$RUNS/calibrate-cylinder/renders" --set plain="$RUNS/calibrate-cylinder-plain/renders" \
+    --set variety="$RUNS/calibrate-cylinder-variety/renders" --set cylinder_chip="$RUNS/cylinder-renders"

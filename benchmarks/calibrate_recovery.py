@@ -1,7 +1,7 @@
 """Does `sasmi calibrate` recover a known preset, and does its report say which knobs it cannot pin?
 
     python benchmarks/calibrate_recovery.py --out runs/calibrate-recovery [--minutes 20] [--chips 32]
-                                            [--params a,b,...] [--profile-trials N] [--table-only]
+                                            [--params a,b,...] [--profile-trials N] [--plain-fid] [--table-only]
 
 The truth is `cylinder_chip` with five knobs moved (TRUTH); 200 of its renders at 128 px (seed 7)
 stand in for real chips. `sasmi calibrate` starts from `cylinder_chip` itself, searches every default
@@ -43,6 +43,7 @@ def main() -> int:
     p.add_argument("--params", default="default",
                    help="knobs searched, comma-separated (calibrate's --params); the tables show the run's")
     p.add_argument("--profile-trials", type=int, help="calibrate's --profile-trials (default: its default)")
+    p.add_argument("--plain-fid", action="store_true", help="calibrate's --plain-fid: the plain φ-FID ratio")
     p.add_argument("--table-only", action="store_true", help="print the tables of a finished run, calibrating no more")
     args = p.parse_args()
 
@@ -67,7 +68,8 @@ def main() -> int:
         (args.out / "truth.toml").write_text(preset_toml(truth_raw))
         render_set(RenderJob(preset=Preset.from_dict(truth_raw, path=start.path), out=chips, count=200, seed=7,
                              size=128))
-        cfg = CalibrateConfig(params=params, minutes=args.minutes, chips=args.chips)
+        cfg = CalibrateConfig(params=params, minutes=args.minutes, chips=args.chips,
+                              spread_correction=not args.plain_fid)
         if args.profile_trials is not None:
             cfg = replace(cfg, profile_trials=args.profile_trials)
         calibrate(chips / "images", START, cfg, run)

@@ -41,6 +41,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--variety-weight", type=float, default=d.variety_weight, metavar="W",
                    help="weight of the real chips no render lies near in φ (recall's shortfall), which keeps the "
                         f"renders as varied as the real chips (default: {d.variety_weight:g}, off; docs/calibrate.md)")
+    p.add_argument("--plain-fid", action="store_true",
+                   help="score φ by the plain FID ratio, without taking off the small-sample bias by which renders "
+                        "less varied than the real chips would score better (docs/calibrate.md)")
     p.add_argument("--phi", type=Path, metavar="RUN", help="φ autoencoder run or weights (default: the shipped φ)")
     p.add_argument("--seed", type=int, default=d.seed, help="preset draws of the trials (default: 0)")
     p.add_argument("--contenders", type=int, default=d.contenders, metavar="N",
@@ -64,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     params = DEFAULT_KNOBS if args.params == "default" else named
     cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
-                          variety_weight=args.variety_weight, workers=args.workers, scheduler=args.scheduler,
+                          variety_weight=args.variety_weight, spread_correction=not args.plain_fid,
+                          workers=args.workers, scheduler=args.scheduler,
                           contenders=args.contenders, profile_trials=args.profile_trials,
                           refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)

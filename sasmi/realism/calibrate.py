@@ -10,7 +10,9 @@ scores them against the real chips:
 d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes; the
 target sizes, the share of chips with a target and the shadow level count only where most real chips show a
 target); the φ-FID ratio is the renders' FID to the real chips in φ over that of as many real chips to the rest
-(1: as close as real chips are to each other). The first term pins what the statistics measure, the second the
+(1: as close as real chips are to each other), the renders' FID less the part of its small-sample bias that their
+own spread adds beyond the real chips' (`spread_corrected_fid`: else renders too alike would score better than real
+chips). The first term pins what the statistics measure, the second the
 whole distribution of looks; the third (off by default: docs/calibrate.md) keeps them as varied as the real
 chips, which the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in
 RUN/study.db, so a rerun continues it; --minutes counts the search time of all runs together.
@@ -44,6 +46,10 @@ FAILED = 1e3  # objective of a knob setting that makes no valid preset
 FRESH_DRAWS = 4
 OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
 ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
+# share of a set's half-split FID that its own spread adds to its FID to others: n chips add about c x spread / n,
+# each half of n / 2 adds 2c x spread / n, so the two halves carry 4 times the set's share (BIAS_SHARE = 1 / 4)
+BIAS_SHARE = 0.25
+HALF_SPLITS = 4  # fixed random halvings averaged: one halving's FID spreads as much as the trial's own
 # what the gradient refines: the differentiable render's parameters but the source level, which post.gain searches
 REFINED = ("seafloor.roughness", "seafloor.albedo", "sonar.elevation")
 
@@ -59,6 +65,8 @@ class CalibrateConfig:
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     variety_weight: float = 0.0  # weight of the recall shortfall: what keeps the renders as varied as the real chips
+    # φ-FID less the small-sample bias the renders' own spread adds beyond the real chips' (False: the plain FID)
+    spread_correction: bool = True
     final_chips: int = 200  # renders of the start and the calibrated preset in the report, other scenes
     seed: int = 0  # preset draws of the trials; the report's renders use seed + 1
     workers: int = 1  # local Dask processes scoring trials side by side (1: here, one after another)
@@ -104,6 +112,7 @@ class RealChips:
     checked: tuple[str, ...]  # the statistics matched: the target ones only where most chips show a target
     phi: np.ndarray  # (N, D) float64
     phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
+    phi_halves: float  # half-split FID of those `chips` real chips (`half_split_fid`), averaged over the same draws
     recall_reference: float  # share of the other real chips near `chips` real chips in φ, averaged over the same draws
     images: np.ndarray  # (N, S, S) float32 in [0, 1]
 
@@ -120,15 +129,38 @@ def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 1
                          f"least {cfg.chips + 8}")
     phi = phi_features(encoder, images)
     rng = np.random.default_rng([cfg.seed, 7])
-    reference, recall = [], []
+    reference, halves, recall = [], [], []
     for _ in range(draws):
         order = rng.permutation(len(phi))
         reference.append(fid(phi[order[:cfg.chips]], phi[order[cfg.chips:]]))
+        halves.append(half_split_fid(phi[order[:cfg.chips]]))
         recall.append(precision_recall(phi[order[cfg.chips:]], phi[order[:cfg.chips]])[1])
     targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
     checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
     values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
-    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), float(np.mean(recall)), images)
+    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), float(np.mean(halves)),
+                     float(np.mean(recall)), images)
+
+
+def half_split_fid(features: np.ndarray) -> float:
+    """FID between two halves of one set of chips, averaged over HALF_SPLITS fixed halvings: what sampling
+    alone adds to the FID of half as many chips, which grows with the set's spread."""
+    from sasmi.eval.metrics import fid
+
+    rng = np.random.default_rng(0)  # fixed: the same renders score the same in every trial
+    half = len(features) // 2
+    orders = [rng.permutation(len(features)) for _ in range(HALF_SPLITS)]
+    return float(np.mean([fid(features[o[:half]], features[o[half:2 * half]]) for o in orders]))
+
+
+def spread_corrected_fid(features: np.ndarray, real: RealChips) -> float:
+    """The FID of `features` to the real chips, less BIAS_SHARE of the amount by which their half-split FID
+    exceeds that of as many real chips: the FID of a few renders in φ's 1024 dimensions falls as they grow
+    alike, since less spread means less sampling noise in their covariance; corrected, renders drawn in towards
+    their mean no longer score better than the same renders as they are (benchmarks/calibrate_phi_distance.py)."""
+    from sasmi.eval.metrics import fid
+
+    return fid(features, real.phi) - BIAS_SHARE * (half_split_fid(features) - real.phi_halves)
 
 
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
@@ -150,7 +182,8 @@ def medians(images: np.ndarray) -> dict[str, float]:
     return out
 
 
-def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float = 0.0) -> dict:
+def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float = 0.0,
+          spread_correction: bool = True) -> dict:
     """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, recall."""
     from sasmi.eval.features import phi_features
     from sasmi.eval.manifold import precision_recall
@@ -159,7 +192,8 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, varie
     ours = medians(images)
     distances = {k: OBJECTIVE[k].distance(real.medians[k], ours[k]) for k in real.checked}
     features = phi_features(encoder, images)
-    ratio = fid(features, real.phi) / real.phi_reference
+    distance = spread_corrected_fid(features, real) if spread_correction else fid(features, real.phi)
+    ratio = distance / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
     recall = precision_recall(real.phi, features)[1]
     shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
@@ -173,7 +207,7 @@ def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConf
     from sasmi.eval.manifold import precision_recall_matched
     from sasmi.eval.metrics import fid_ratio_matched
 
-    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight)
+    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.spread_correction)
     ratio = fid_ratio_matched(s["features"], real.phi, 200, cfg.seed)
     precision, recall = precision_recall_matched(real.phi, s["features"], seed=cfg.seed)
     return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
@@ -201,7 +235,7 @@ def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: Calib
         images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
     except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
         return {"objective": FAILED, "invalid": str(e)}
-    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight)
+    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.spread_correction)
     return {k: s[k] for k in ("objective", "statistics", "phi_ratio", "recall", "passed")}
 
 

@@ -15,7 +15,8 @@ from PIL import Image
 
 from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
-from sasmi.realism.calibrate import CalibrateConfig, calibrate, real_chips, render_chips, score
+from sasmi.realism.calibrate import (CalibrateConfig, RealChips, calibrate, half_split_fid, real_chips, render_chips,
+                                     score, spread_corrected_fid)
 from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, knob, spread, start_values
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
 
@@ -122,6 +123,31 @@ noise_std = 0.01
 """
 
 
+def test_the_corrected_phi_distance_does_not_reward_renders_drawn_in_towards_their_mean():
+    """32 draws of a 256-dimensional Gaussian whose variance falls as 1 / k (as φ's does) against 115 others: the
+    plain FID scores them narrowed to 0.8 or 0.6 of their spread well below themselves, the corrected one not, and
+    both still charge a wider spread."""
+    from sasmi.eval.metrics import fid
+
+    rng = np.random.default_rng(0)
+    scale = np.arange(1, 257) ** -0.5
+
+    def draw(n: int) -> np.ndarray:
+        return rng.standard_normal((n, len(scale))) * scale
+
+    phi = draw(115)
+    orders = [rng.permutation(115) for _ in range(16)]  # as `real_chips` draws its reference
+    real = RealChips(None, {}, (), phi, np.mean([fid(phi[o[:32]], phi[o[32:]]) for o in orders]),
+                     np.mean([half_split_fid(phi[o[:32]]) for o in orders]), 0.5, None)
+    renders = [draw(32) for _ in range(30)]
+    plain = {f: np.mean([fid(f * x, phi) for x in renders]) / real.phi_reference for f in (1, 0.8, 0.6, 1.25)}
+    corrected = {f: np.mean([spread_corrected_fid(f * x, real) for x in renders]) / real.phi_reference
+                 for f in (1, 0.8, 0.6, 1.25)}
+    assert plain[0.8] < 0.9 * plain[1] and plain[0.6] < 0.9 * plain[1], plain
+    assert corrected[0.8] > corrected[1] - 0.03 and corrected[0.6] > corrected[1] - 0.03, corrected
+    assert corrected[1.25] > corrected[1] + 0.05, corrected
+
+
 @pytest.fixture(scope="module")
 def known(tmp_path_factory):
     """Real chips made by a known preset (gain 0.3, seed 5), and a start preset at 2.5 x that gain."""
@@ -184,6 +210,15 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
 
     with pytest.raises(SasmiError, match="other settings \\(chips\\)"):
         calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "chips": 20}), out, progress=False)
+    # the φ term is part of what a rerun must share: --plain-fid is named among the settings that differ
+    refused = {}
+    for flag in ([], ["--plain-fid"]):
+        done = subprocess.run([sys.executable, "-m", "sasmi", "calibrate", "--real", str(real), "--preset", str(start),
+                               "--params", "post.gain", "--chips", "16", "--size", "64", "--out", str(out), *flag],
+                              capture_output=True, text=True)
+        assert done.returncode == 2, done.stderr
+        refused[tuple(flag)] = done.stderr
+    assert "spread_correction" in refused[("--plain-fid",)] and "spread_correction" not in refused[()], refused
 
 
 def test_a_calibration_killed_inside_a_trial_resumes_exactly(known, tmp_path, monkeypatch):
