@@ -154,10 +154,11 @@ def half_split_fid(features: np.ndarray) -> float:
 
 
 def spread_corrected_fid(features: np.ndarray, real: RealChips) -> float:
-    """The FID of `features` to the real chips, less BIAS_SHARE of the amount by which their half-split FID
-    exceeds that of as many real chips: the FID of a few renders in φ's 1024 dimensions falls as they grow
-    alike, since less spread means less sampling noise in their covariance; corrected, renders drawn in towards
-    their mean no longer score better than the same renders as they are (benchmarks/calibrate_phi_distance.py)."""
+    """The FID of a trial's `features` to the real chips, less BIAS_SHARE of the amount by which their half-split
+    FID exceeds that of as many real chips (`RealChips.phi_halves`, measured at a trial's size only): the FID of a
+    few renders in φ's 1024 dimensions falls as they grow alike, since less spread means less sampling noise in
+    their covariance; corrected, renders drawn in towards their mean no longer score better than the same renders
+    as they are (benchmarks/calibrate_phi_distance.py)."""
     from sasmi.eval.metrics import fid
 
     return fid(features, real.phi) - BIAS_SHARE * (half_split_fid(features) - real.phi_halves)
@@ -207,7 +208,9 @@ def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConf
     from sasmi.eval.manifold import precision_recall_matched
     from sasmi.eval.metrics import fid_ratio_matched
 
-    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.spread_correction)
+    # the report renders more chips than a trial, and the real chips' half-split FID is known at a trial's size
+    # only (it does not fall as 1 / n in φ's dimensions), so this objective is the plain one
+    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, spread_correction=False)
     ratio = fid_ratio_matched(s["features"], real.phi, 200, cfg.seed)
     precision, recall = precision_recall_matched(real.phi, s["features"], seed=cfg.seed)
     return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
