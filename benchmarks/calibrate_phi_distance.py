@@ -3,8 +3,8 @@
 A trial scores 32 renders against the real chips. Here 32 real chips stand in for the renders: drawn at
 random from the real folder, their φ pulled towards the real chips' mean by a factor (1: as they are, 0.8 and 0.6:
 less varied, 1.25: more), then scored against the other real chips by the plain φ-FID, by the objective's
-spread-corrected φ-FID (`sasmi.realism.calibrate.spread_corrected_fid`, its reference drawn from the same other
-chips) and by the unbiased KID of `sasmi evaluate` (32 against 32 others). A distance that does not reward
+spread-corrected φ-FID (`spread_corrected_fid` of sasmi/realism/calibration_objective.py, its reference drawn from
+the same other chips) and by the unbiased KID of `sasmi evaluate` (32 against 32 others). A distance that does not reward
 narrowness rises below 1; one useful to a search also moves by more than its spread from one draw to the next.
 
     .venv/bin/python benchmarks/calibrate_phi_distance.py runs/split/train/targets [--phi RUN/phi] [--draws 60]
@@ -26,7 +26,7 @@ FACTORS = (1.0, 0.8, 0.6, 1.25)
 def main() -> None:
     from sasmi.eval.features import as_encoder, image_paths, load_images, phi_features
     from sasmi.eval.metrics import fid, mmd2_unbiased
-    from sasmi.realism.calibrate import RealChips, half_split_fid, spread_corrected_fid
+    from sasmi.realism.calibration_objective import RealChips, half_split_fid, spread_corrected_fid
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("real", help="a folder of real chips (at least 96)")

@@ -11,8 +11,8 @@ d is how many `sasmi stats --check` tolerances the renders' median lies from the
 target sizes, the share of chips with a target and the shadow level count only where most real chips show a
 target); the φ-FID ratio is the renders' FID to the real chips in φ over that of as many real chips to the rest
 (1: as close as real chips are to each other), the renders' FID less the part of its small-sample bias that their
-own spread adds beyond the real chips' (`spread_corrected_fid`: else renders too alike would score better than real
-chips). The first term pins what the statistics measure, the second the
+own spread adds beyond the real chips' (else renders too alike would score better than real chips); the objective
+and its parts: sasmi/realism/calibration_objective.py. The first term pins what the statistics measure, the second the
 whole distribution of looks; the third (off by default: docs/calibrate.md) keeps them as varied as the real
 chips, which the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in
 RUN/study.db, so a rerun continues it; --minutes counts the search time of all runs together.
@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
-import math
 import os
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -30,26 +29,19 @@ from typing import Iterator
 
 import numpy as np
 
-from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
-from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
+from sasmi.realism.calibration_objective import RealChips, final_score, real_chips, score
 from sasmi.realism.calibration_study import asked, calibrated_trial, full_disk_named, open_study, run_batch
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
 
 SAMPLERS = ("cmaes", "tpe")
-FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
 FAILED = 1e3  # objective of a knob setting that makes no valid preset
 # other draws of the trials' scenes the calibrated trial is chosen on (and as many more its knobs are judged on)
 FRESH_DRAWS = 4
-OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
 ROOM = 20_000_000  # bytes: a study of thousands of trials, the report's figures
-# share of a set's half-split FID that its own spread adds to its FID to others: n chips add about c x spread / n,
-# each half of n / 2 adds 2c x spread / n, so the two halves carry 4 times the set's share (BIAS_SHARE = 1 / 4)
-BIAS_SHARE = 0.25
-HALF_SPLITS = 4  # fixed random halvings averaged: one halving's FID spreads as much as the trial's own
 # what the gradient refines: the differentiable render's parameters but the source level, which post.gain searches
 REFINED = ("seafloor.roughness", "seafloor.albedo", "sonar.elevation")
 
@@ -105,116 +97,12 @@ class CalibrateConfig:
                          "refine_steps")}
 
 
-@dataclass(frozen=True)
-class RealChips:
-    folder: Path
-    medians: dict[str, float]
-    checked: tuple[str, ...]  # the statistics matched: the target ones only where most chips show a target
-    phi: np.ndarray  # (N, D) float64
-    phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
-    phi_halves: float  # half-split FID of those `chips` real chips (`half_split_fid`), averaged over the same draws
-    recall_reference: float  # share of the other real chips near `chips` real chips in φ, averaged over the same draws
-    images: np.ndarray  # (N, S, S) float32 in [0, 1]
-
-
-def real_chips(folder: str | Path, cfg: CalibrateConfig, encoder, draws: int = 16) -> RealChips:
-    from sasmi.eval.features import image_paths, load_images, phi_features
-    from sasmi.eval.manifold import precision_recall
-    from sasmi.eval.metrics import fid
-
-    stats = chip_statistics(folder, cfg.size)
-    images = load_images(image_paths(folder), cfg.size)
-    if len(images) < cfg.chips + 8:
-        raise SasmiError(f"--real {folder}: {len(images)} chips; calibrating with --chips {cfg.chips} needs at "
-                         f"least {cfg.chips + 8}")
-    phi = phi_features(encoder, images)
-    rng = np.random.default_rng([cfg.seed, 7])
-    reference, halves, recall = [], [], []
-    for _ in range(draws):
-        order = rng.permutation(len(phi))
-        reference.append(fid(phi[order[:cfg.chips]], phi[order[cfg.chips:]]))
-        halves.append(half_split_fid(phi[order[:cfg.chips]]))
-        recall.append(precision_recall(phi[order[cfg.chips:]], phi[order[:cfg.chips]])[1])
-    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
-    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
-    values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
-    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), float(np.mean(halves)),
-                     float(np.mean(recall)), images)
-
-
-def half_split_fid(features: np.ndarray) -> float:
-    """FID between two halves of one set of chips, averaged over HALF_SPLITS fixed halvings: what sampling
-    alone adds to the FID of half as many chips, which grows with the set's spread."""
-    from sasmi.eval.metrics import fid
-
-    rng = np.random.default_rng(0)  # fixed: the same renders score the same in every trial
-    half = len(features) // 2
-    orders = [rng.permutation(len(features)) for _ in range(HALF_SPLITS)]
-    return float(np.mean([fid(features[o[:half]], features[o[half:2 * half]]) for o in orders]))
-
-
-def spread_corrected_fid(features: np.ndarray, real: RealChips) -> float:
-    """The FID of a trial's `features` to the real chips, less BIAS_SHARE of the amount by which their half-split
-    FID exceeds that of as many real chips (`RealChips.phi_halves`, measured at a trial's size only): the FID of a
-    few renders in φ's 1024 dimensions falls as they grow alike, since less spread means less sampling noise in
-    their covariance; corrected, renders drawn in towards their mean no longer score better than the same renders
-    as they are (benchmarks/calibrate_phi_distance.py)."""
-    from sasmi.eval.metrics import fid
-
-    return fid(features, real.phi) - BIAS_SHARE * (half_split_fid(features) - real.phi_halves)
-
-
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
     """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are."""
     from sasmi.renderset.order import render_grouped
 
     images = render_grouped([preset.sample(seed, i) for i in range(count)], cfg.size, cfg.spp)
     return (np.round(np.clip(images, 0, 1) * 255) / 255).astype(np.float32)
-
-
-def medians(images: np.ndarray) -> dict[str, float]:
-    """Every statistic's median over the chips where it is found, and the share of chips with a target."""
-    rows = [image_statistics(im) for im in images]
-    out = {}
-    for k in STATISTICS:
-        v = np.array([r[k] for r in rows])
-        out[k] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else math.nan
-    out["targets_found"] = float(np.mean([math.isfinite(r["shadow_length"]) for r in rows]))
-    return out
-
-
-def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float = 0.0,
-          spread_correction: bool = True) -> dict:
-    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, recall."""
-    from sasmi.eval.features import phi_features
-    from sasmi.eval.manifold import precision_recall
-    from sasmi.eval.metrics import fid
-
-    ours = medians(images)
-    distances = {k: OBJECTIVE[k].distance(real.medians[k], ours[k]) for k in real.checked}
-    features = phi_features(encoder, images)
-    distance = spread_corrected_fid(features, real) if spread_correction else fid(features, real.phi)
-    ratio = distance / real.phi_reference
-    stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
-    recall = precision_recall(real.phi, features)[1]
-    shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
-    return {"objective": stats_term + phi_weight * ratio + variety_weight * shortfall, "statistics": stats_term,
-            "phi_ratio": ratio, "recall": recall, "distances": distances, "medians": ours, "features": features,
-            "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES)}
-
-
-def final_score(images: np.ndarray, real: RealChips, encoder, cfg: CalibrateConfig) -> dict:
-    """`score` with the φ-FID ratio, precision and recall of `sasmi evaluate` (matched sizes): the report's figures."""
-    from sasmi.eval.manifold import precision_recall_matched
-    from sasmi.eval.metrics import fid_ratio_matched
-
-    # the report renders more chips than a trial, and the real chips' half-split FID is known at a trial's size
-    # only (it does not fall as 1 / n in φ's dimensions), so this objective is the plain one
-    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, spread_correction=False)
-    ratio = fid_ratio_matched(s["features"], real.phi, 200, cfg.seed)
-    precision, recall = precision_recall_matched(real.phi, s["features"], seed=cfg.seed)
-    return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
-            "recall": recall.value}
 
 
 def _check_record(out: Path, record: dict) -> None:
@@ -302,7 +190,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     out = Path(out)
     preset = load_preset(start)
     encoder = as_encoder(phi)
-    real = real_chips(real_folder, cfg, encoder)  # read before anything is written: a bad folder leaves no RUN
+    # read before anything is written: a bad folder leaves no RUN
+    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
     check_room(out, ROOM, "a calibration's study and report")
     lock = FolderLock(out, "running sasmi calibrate")
     try:
@@ -352,7 +241,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)
-            shown[name] = (images, final_score(images, real, encoder, cfg))
+            shown[name] = (images, final_score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.seed))
         refinement = None
         if cfg.refine_steps:
             best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
@@ -381,6 +270,6 @@ def refine(raw: dict, start: Preset, real: RealChips, encoder, cfg: CalibrateCon
         images = render_chips(Preset.from_dict(refined, path=start.path), cfg.final_chips, final, final.seed)
     except SasmiError as e:  # a scaled relief or altitude that breaks a rule in some scene
         return raw, calibrated, {**note, "kept": False, "invalid": str(e)}
-    score = final_score(images, real, encoder, cfg)
+    score = final_score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.seed)
     note.update(after=score["objective"], kept=score["objective"] < note["before"])
     return (refined, (images, score), note) if note["kept"] else (raw, calibrated, note)

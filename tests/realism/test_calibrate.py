@@ -15,8 +15,8 @@ from PIL import Image
 
 from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
-from sasmi.realism.calibrate import (CalibrateConfig, RealChips, calibrate, half_split_fid, real_chips, render_chips,
-                                     score, spread_corrected_fid)
+from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
+from sasmi.realism.calibration_objective import RealChips, half_split_fid, real_chips, score, spread_corrected_fid
 from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, knob, spread, start_values
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
 
@@ -171,7 +171,7 @@ def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_
     real_folder, _ = known
     cfg = CalibrateConfig(chips=16, size=64)
     encoder = as_encoder(None)
-    real = real_chips(real_folder, cfg, encoder)
+    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
     assert 0.3 < real.recall_reference < 1.0
     truth = Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3")))
     varied = render_chips(truth, 16, cfg, seed=9)
@@ -320,11 +320,11 @@ def test_trials_scored_on_dask_workers_score_as_here(known, tmp_path):
 
     # the knob moves of the report were scored on the workers too, as here
     from sasmi.eval.features import as_encoder
-    from sasmi.realism.calibrate import apply, real_chips, trial_score
+    from sasmi.realism.calibrate import apply, trial_score
     from sasmi.realism.calibration_pins import sensitivity
 
     preset, encoder = load_preset(start), as_encoder(None)
-    chips = real_chips(real, cfg, encoder)
+    chips = real_chips(real, encoder, cfg.chips, cfg.size, cfg.seed)
     best = study.trials[study.user_attrs["calibrated_trial"]].params
     here = sensitivity(best, lambda settings: [trial_score(apply(preset.raw, v), preset.path, chips, cfg,
                                                            encoder)["objective"] for v in settings])

@@ -1,0 +1,132 @@
+"""`sasmi calibrate`'s objective: the real chips' reference figures, and the score of a trial's renders.
+
+    objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
+                + variety_weight x max(0, 1 - recall / the real chips' own recall)
+
+(sasmi/realism/calibrate.py says what each term holds; docs/calibrate.md, *What it minimises*.)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
+from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
+from sasmi.errors import SasmiError
+
+FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
+OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
+# share of a set's half-split FID that its own spread adds to its FID to others: n chips add about c x spread / n,
+# each half of n / 2 adds 2c x spread / n, so the two halves carry 4 times the set's share (BIAS_SHARE = 1 / 4)
+BIAS_SHARE = 0.25
+HALF_SPLITS = 4  # fixed random halvings averaged: one halving's FID spreads as much as the trial's own
+
+
+@dataclass(frozen=True)
+class RealChips:
+    folder: Path
+    medians: dict[str, float]
+    checked: tuple[str, ...]  # the statistics matched: the target ones only where most chips show a target
+    phi: np.ndarray  # (N, D) float64
+    phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
+    phi_halves: float  # half-split FID of those `chips` real chips (`half_split_fid`), averaged over the same draws
+    recall_reference: float  # share of the other real chips near `chips` real chips in φ, averaged over the same draws
+    images: np.ndarray  # (N, S, S) float32 in [0, 1]
+
+
+def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, draws: int = 16) -> RealChips:
+    """The real chips at `size` px, their statistics' medians and φ, and their reference figures for trials of
+    `chips` renders: `draws` random draws of `chips` real chips (seeded by `seed`) against the others."""
+    from sasmi.eval.features import image_paths, load_images, phi_features
+    from sasmi.eval.manifold import precision_recall
+    from sasmi.eval.metrics import fid
+
+    stats = chip_statistics(folder, size)
+    images = load_images(image_paths(folder), size)
+    if len(images) < chips + 8:
+        raise SasmiError(f"--real {folder}: {len(images)} chips; calibrating with --chips {chips} needs at "
+                         f"least {chips + 8}")
+    phi = phi_features(encoder, images)
+    rng = np.random.default_rng([seed, 7])
+    reference, halves, recall = [], [], []
+    for _ in range(draws):
+        order = rng.permutation(len(phi))
+        reference.append(fid(phi[order[:chips]], phi[order[chips:]]))
+        halves.append(half_split_fid(phi[order[:chips]]))
+        recall.append(precision_recall(phi[order[chips:]], phi[order[:chips]])[1])
+    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
+    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
+    values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
+    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), float(np.mean(halves)),
+                     float(np.mean(recall)), images)
+
+
+def half_split_fid(features: np.ndarray) -> float:
+    """FID between two halves of one set of chips, averaged over HALF_SPLITS fixed halvings: what sampling
+    alone adds to the FID of half as many chips, which grows with the set's spread."""
+    from sasmi.eval.metrics import fid
+
+    rng = np.random.default_rng(0)  # fixed: the same renders score the same in every trial
+    half = len(features) // 2
+    orders = [rng.permutation(len(features)) for _ in range(HALF_SPLITS)]
+    return float(np.mean([fid(features[o[:half]], features[o[half:2 * half]]) for o in orders]))
+
+
+def spread_corrected_fid(features: np.ndarray, real: RealChips) -> float:
+    """The FID of a trial's `features` to the real chips, less BIAS_SHARE of the amount by which their half-split
+    FID exceeds that of as many real chips (`RealChips.phi_halves`, measured at a trial's size only): the FID of a
+    few renders in φ's 1024 dimensions falls as they grow alike, since less spread means less sampling noise in
+    their covariance; corrected, renders drawn in towards their mean no longer score better than the same renders
+    as they are (benchmarks/calibrate_phi_distance.py)."""
+    from sasmi.eval.metrics import fid
+
+    return fid(features, real.phi) - BIAS_SHARE * (half_split_fid(features) - real.phi_halves)
+
+
+def medians(images: np.ndarray) -> dict[str, float]:
+    """Every statistic's median over the chips where it is found, and the share of chips with a target."""
+    rows = [image_statistics(im) for im in images]
+    out = {}
+    for k in STATISTICS:
+        v = np.array([r[k] for r in rows])
+        out[k] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else math.nan
+    out["targets_found"] = float(np.mean([math.isfinite(r["shadow_length"]) for r in rows]))
+    return out
+
+
+def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float = 0.0,
+          spread_correction: bool = True) -> dict:
+    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, recall."""
+    from sasmi.eval.features import phi_features
+    from sasmi.eval.manifold import precision_recall
+    from sasmi.eval.metrics import fid
+
+    ours = medians(images)
+    distances = {k: OBJECTIVE[k].distance(real.medians[k], ours[k]) for k in real.checked}
+    features = phi_features(encoder, images)
+    distance = spread_corrected_fid(features, real) if spread_correction else fid(features, real.phi)
+    ratio = distance / real.phi_reference
+    stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
+    recall = precision_recall(real.phi, features)[1]
+    shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
+    return {"objective": stats_term + phi_weight * ratio + variety_weight * shortfall, "statistics": stats_term,
+            "phi_ratio": ratio, "recall": recall, "distances": distances, "medians": ours, "features": features,
+            "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES)}
+
+
+def final_score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float,
+                seed: int) -> dict:
+    """`score` with the φ-FID ratio, precision and recall of `sasmi evaluate` (matched sizes): the report's figures."""
+    from sasmi.eval.manifold import precision_recall_matched
+    from sasmi.eval.metrics import fid_ratio_matched
+
+    # the report renders more chips than a trial, and the real chips' half-split FID is known at a trial's size
+    # only (it does not fall as 1 / n in φ's dimensions), so this objective is the plain one
+    s = score(images, real, encoder, phi_weight, variety_weight, spread_correction=False)
+    ratio = fid_ratio_matched(s["features"], real.phi, 200, seed)
+    precision, recall = precision_recall_matched(real.phi, s["features"], seed=seed)
+    return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
+            "recall": recall.value}
