@@ -22,7 +22,7 @@ OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matc
 # share of a set's half-split FID that its own spread adds to its FID to others: n chips add about c x spread / n,
 # each half of n / 2 adds 2c x spread / n, so the two halves carry 4 times the set's share (BIAS_SHARE = 1 / 4)
 BIAS_SHARE = 0.25
-HALF_SPLITS = 4  # fixed random halvings averaged: one halving's FID spreads as much as the trial's own
+HALF_SPLITS = 4  # fixed random halvings averaged, so that the luck of one halving moves the score less
 
 
 @dataclass(frozen=True)
