@@ -26,7 +26,7 @@ FACTORS = (1.0, 0.8, 0.6, 1.25)
 def main() -> None:
     from sasmi.eval.features import as_encoder, image_paths, load_images, phi_features
     from sasmi.eval.metrics import fid, mmd2_unbiased
-    from sasmi.realism.calibration_objective import RealChips, half_split_fid, spread_corrected_fid
+    from sasmi.realism.calibration_objective import half_split_fid, spread_corrected_fid
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("real", help="a folder of real chips (at least 96)")
@@ -47,11 +47,10 @@ def main() -> None:
             drawn, rest = phi[order[:CHIPS]], phi[order[CHIPS:]]
             # the objective's real side, from the other chips alone: `real_chips` with `rest` as the folder
             firsts = [rest[rng.permutation(len(rest))[:CHIPS]] for _ in range(4)]
-            real = RealChips(Path(args.real), {}, (), rest, 1.0, float(np.mean([half_split_fid(f) for f in firsts])),
-                             0.0, phi[:0])
+            halves = float(np.mean([half_split_fid(f) for f in firsts]))
             drawn = centre + factor * (drawn - centre)
             fids.append(fid(drawn, rest))
-            corrected.append(spread_corrected_fid(drawn, real))
+            corrected.append(spread_corrected_fid(drawn, rest, halves))
             kids.append(mmd2_unbiased(drawn, rest[rng.choice(len(rest), CHIPS, replace=False)]))
         rows[factor] = [(np.mean(v), np.std(v)) for v in (fids, corrected, kids)]
     print(f"{len(phi)} real chips of {args.real}; {CHIPS} drawn {args.draws} times per factor")

@@ -211,7 +211,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             while True:
                 spent, done = searched_seconds(study), asked(study)
                 bar.n = min(round(spent), round(budget))
-                if study.best_trials:
+                # best_value reads the best trial alone; best_trials read every trial, seconds each in a long study
+                with contextlib.suppress(ValueError):  # none told yet
                     bar.set_postfix(trials=done, best=f"{study.best_value:.3g}")
                 bar.refresh()
                 if spent >= budget or (cfg.trials is not None and done >= cfg.trials):

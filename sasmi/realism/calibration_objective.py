@@ -39,10 +39,8 @@ class RealChips:
 
 def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, draws: int = 16) -> RealChips:
     """The real chips at `size` px, their statistics' medians and φ, and their reference figures for trials of
-    `chips` renders: `draws` random draws of `chips` real chips (seeded by `seed`) against the others."""
+    `chips` renders (`phi_references`)."""
     from sasmi.eval.features import image_paths, load_images, phi_features
-    from sasmi.eval.manifold import precision_recall
-    from sasmi.eval.metrics import fid
 
     stats = chip_statistics(folder, size)
     images = load_images(image_paths(folder), size)
@@ -50,18 +48,28 @@ def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, dr
         raise SasmiError(f"--real {folder}: {len(images)} chips; calibrating with --chips {chips} needs at "
                          f"least {chips + 8}")
     phi = phi_features(encoder, images)
+    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
+    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
+    values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
+    return RealChips(Path(folder), values, checked, phi, images=images, **phi_references(phi, chips, seed, draws))
+
+
+def phi_references(phi: np.ndarray, chips: int, seed: int, draws: int = 16) -> dict:
+    """RealChips' figures from the real chips' φ alone, what a trial's renders are measured against: FID, half-split
+    FID and recall of `chips` real chips against the others, averaged over `draws` random draws (seeded by `seed`)."""
+    from sasmi.eval.manifold import precision_recall
+    from sasmi.eval.metrics import fid
+
     rng = np.random.default_rng([seed, 7])
     reference, halves, recall = [], [], []
     for _ in range(draws):
         order = rng.permutation(len(phi))
-        reference.append(fid(phi[order[:chips]], phi[order[chips:]]))
-        halves.append(half_split_fid(phi[order[:chips]]))
-        recall.append(precision_recall(phi[order[chips:]], phi[order[:chips]])[1])
-    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
-    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
-    values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
-    return RealChips(Path(folder), values, checked, phi, float(np.mean(reference)), float(np.mean(halves)),
-                     float(np.mean(recall)), images)
+        drawn, rest = phi[order[:chips]], phi[order[chips:]]
+        reference.append(fid(drawn, rest))
+        halves.append(half_split_fid(drawn))
+        recall.append(precision_recall(rest, drawn)[1])
+    return {"phi_reference": float(np.mean(reference)), "phi_halves": float(np.mean(halves)),
+            "recall_reference": float(np.mean(recall))}
 
 
 def half_split_fid(features: np.ndarray) -> float:
@@ -75,15 +83,15 @@ def half_split_fid(features: np.ndarray) -> float:
     return float(np.mean([fid(features[o[:half]], features[o[half:2 * half]]) for o in orders]))
 
 
-def spread_corrected_fid(features: np.ndarray, real: RealChips) -> float:
-    """The FID of a trial's `features` to the real chips, less BIAS_SHARE of the amount by which their half-split
-    FID exceeds that of as many real chips (`RealChips.phi_halves`, measured at a trial's size only): the FID of a
-    few renders in φ's 1024 dimensions falls as they grow alike, since less spread means less sampling noise in
-    their covariance; corrected, renders drawn in towards their mean no longer score better than the same renders
-    as they are (benchmarks/calibrate_phi_distance.py)."""
+def spread_corrected_fid(features: np.ndarray, real_phi: np.ndarray, real_halves: float) -> float:
+    """The FID of a trial's `features` to the real chips' φ, less BIAS_SHARE of the amount by which their half-split
+    FID exceeds that of as many real chips (`real_halves`: RealChips.phi_halves, known at a trial's size only): the
+    FID of a few renders in φ's 1024 dimensions falls as they grow alike, since less spread means less sampling
+    noise in their covariance; corrected, renders drawn in towards their mean no longer score better than the same
+    renders as they are (benchmarks/calibrate_phi_distance.py)."""
     from sasmi.eval.metrics import fid
 
-    return fid(features, real.phi) - BIAS_SHARE * (half_split_fid(features) - real.phi_halves)
+    return fid(features, real_phi) - BIAS_SHARE * (half_split_fid(features) - real_halves)
 
 
 def medians(images: np.ndarray) -> dict[str, float]:
@@ -107,7 +115,8 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, varie
     ours = medians(images)
     distances = {k: OBJECTIVE[k].distance(real.medians[k], ours[k]) for k in real.checked}
     features = phi_features(encoder, images)
-    distance = spread_corrected_fid(features, real) if spread_correction else fid(features, real.phi)
+    distance = (spread_corrected_fid(features, real.phi, real.phi_halves) if spread_correction
+                else fid(features, real.phi))
     ratio = distance / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
     recall = precision_recall(real.phi, features)[1]

@@ -16,8 +16,8 @@ from PIL import Image
 from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
-from sasmi.realism.calibration_objective import RealChips, half_split_fid, real_chips, score, spread_corrected_fid
-from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, knob, spread, start_values
+from sasmi.realism.calibration_objective import phi_references, real_chips, score, spread_corrected_fid
+from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, spread, start_values
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
 
 
@@ -136,13 +136,11 @@ def test_the_corrected_phi_distance_does_not_reward_renders_drawn_in_towards_the
         return rng.standard_normal((n, len(scale))) * scale
 
     phi = draw(115)
-    orders = [rng.permutation(115) for _ in range(16)]  # as `real_chips` draws its reference
-    real = RealChips(None, {}, (), phi, np.mean([fid(phi[o[:32]], phi[o[32:]]) for o in orders]),
-                     np.mean([half_split_fid(phi[o[:32]]) for o in orders]), 0.5, None)
+    real = phi_references(phi, 32, seed=0)
     renders = [draw(32) for _ in range(30)]
-    plain = {f: np.mean([fid(f * x, phi) for x in renders]) / real.phi_reference for f in (1, 0.8, 0.6, 1.25)}
-    corrected = {f: np.mean([spread_corrected_fid(f * x, real) for x in renders]) / real.phi_reference
-                 for f in (1, 0.8, 0.6, 1.25)}
+    plain = {f: np.mean([fid(f * x, phi) for x in renders]) / real["phi_reference"] for f in (1, 0.8, 0.6, 1.25)}
+    corrected = {f: np.mean([spread_corrected_fid(f * x, phi, real["phi_halves"]) for x in renders])
+                 / real["phi_reference"] for f in (1, 0.8, 0.6, 1.25)}
     assert plain[0.8] < 0.9 * plain[1] and plain[0.6] < 0.9 * plain[1], plain
     assert corrected[0.8] > corrected[1] - 0.03 and corrected[0.6] > corrected[1] - 0.03, corrected
     assert corrected[1.25] > corrected[1] + 0.05, corrected

@@ -1,0 +1,89 @@
+"""Where a set of renders lacks the real chips' variety: along the real chips' main φ directions, or off them.
+
+The real chips' 8 principal directions in φ carry what varies most from chip to chip (mean level, floor texture,
+target size). For each folder of renders: its sd along each direction over the real chips' (1: as varied),
+the mean log² of those ratios, its sd off the directions (the rest of φ's 1024 dimensions) over the real chips',
+and recall (the share of the real chips near some render in φ, k = 3, as `sasmi calibrate` scores a trial) of
+32 renders against the real chips, averaged over 16 draws; the real chips' own recall is that of 32 of them against
+the others. The real chips' sd is measured on chips outside the directions' fit (10 folds), as renders are: the chips
+that fit a direction spread more along it than any others do.
+
+    .venv/bin/python benchmarks/calibrate_variety.py REAL RENDERS [RENDERS ...] [--phi RUN/phi]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+AXES = 8
+CHIPS = 32  # a trial's renders
+DRAWS = 16
+FOLDS = 10
+
+
+def held_out_spread(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The real chips' main directions, and their sd along them and off them as chips outside the fit see them."""
+    axes = np.linalg.svd(phi - phi.mean(0), full_matrices=False)[2][:AXES]
+    along, off = [], []
+    for fold in np.array_split(np.random.default_rng(0).permutation(len(phi)), FOLDS):
+        fit = np.setdiff1d(np.arange(len(phi)), fold)
+        centre = phi[fit].mean(0)
+        fitted = np.linalg.svd(phi[fit] - centre, full_matrices=False)[2][:AXES]
+        projected = (phi[fold] - centre) @ fitted.T
+        along.append(projected)
+        off.append(((phi[fold] - centre) ** 2).sum(1) - (projected ** 2).sum(1))
+    return axes, np.sqrt(np.mean(np.concatenate(along) ** 2, axis=0)), float(np.sqrt(np.concatenate(off).mean()))
+
+
+def spread(x: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
+    centred = x - x.mean(0)
+    projected = centred @ axes.T
+    off = (centred ** 2).sum(1) - (projected ** 2).sum(1)
+    return projected.std(0, ddof=1), float(np.sqrt(off.sum() / (len(x) - 1)))
+
+
+def main() -> None:
+    from sasmi.eval.features import as_encoder, image_paths, load_images, phi_features
+    from sasmi.eval.manifold import precision_recall
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("real", help="the real chips the renders were matched to")
+    ap.add_argument("renders", nargs="+", help="folders of renders, or of real chips kept out (more than 32 each)")
+    ap.add_argument("--phi", help="φ run folder or checkpoint (default: the shipped φ)")
+    args = ap.parse_args()
+
+    encoder = as_encoder(args.phi)
+
+    def features(folder: str) -> np.ndarray:
+        paths = image_paths(folder)
+        if len(paths) < CHIPS + 1:
+            sys.exit(f"{folder}: {len(paths)} chips; at least {CHIPS + 1} needed")
+        return phi_features(encoder, load_images(paths, 128)).astype(np.float64)
+
+    real = features(args.real)
+    axes, real_along, real_off = held_out_spread(real)
+    rng = np.random.default_rng(0)
+    own = np.mean([precision_recall(real[o[CHIPS:]], real[o[:CHIPS]])[1]
+                   for o in (rng.permutation(len(real)) for _ in range(DRAWS))])
+    print(f"{len(real)} real chips of {args.real}; their sd along the {AXES} main φ directions "
+          f"{', '.join(f'{v:.2f}' for v in real_along)}, off them {real_off:.2f}; recall of {CHIPS} of them "
+          f"against the others {own:.2f}")
+    print(f"| renders | sd along the {AXES} main directions ÷ real | mean log² | sd off them ÷ real | "
+          f"recall, {CHIPS} against the real chips |")
+    print("|---|---|---|---|---|")
+    for folder in args.renders:
+        x = features(folder)
+        along, off = spread(x, axes)
+        ratio = along / real_along
+        recall = np.mean([precision_recall(real, x[rng.permutation(len(x))[:CHIPS]])[1] for _ in range(DRAWS)])
+        print(f"| {folder} | {' '.join(f'{r:.2f}' for r in ratio)} | {np.mean(np.log(ratio) ** 2):.2f} | "
+              f"{off / real_off:.2f} | {recall:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
