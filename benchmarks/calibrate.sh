@@ -6,8 +6,7 @@
 #      2 and 3, calibrating the search's best: --contenders 1); 400 renders of each result against the validation
 #      targets: `sasmi stats --check` and the φ-FID ratio beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
-#      scene group among themselves, with the plain φ-FID ratio; 400 renders against the held-back floors of that
-#      sonar.
+#      scene group among themselves; 400 renders against the held-back floors of that sonar.
 #   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, as in 1; 400 renders of each
 #      against the validation targets beside cylinder_chip's own.
 #
@@ -60,7 +59,7 @@ print(f"{len(rows)} {sonar} chips in {out}")
 PY
 [ -d "$RUNS/$SONAR-split" ] || $SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
-    --chips 16 --minutes "$MINUTES" --contenders 1 --plain-fid --out "$RUNS/calibrate-$SONAR"
+    --chips 16 --minutes "$MINUTES" --contenders 1 --out "$RUNS/calibrate-$SONAR"
 $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
 $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \

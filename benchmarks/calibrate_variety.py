@@ -8,7 +8,9 @@ and recall (the share of the real chips near some render in φ, k = 3, as `sasmi
 the others. The real chips' sd is measured on chips outside the directions' fit (10 folds), as renders are: the chips
 that fit a direction spread more along it than any others do.
 
-    .venv/bin/python benchmarks/calibrate_variety.py REAL RENDERS [RENDERS ...] [--phi RUN/phi]
+    .venv/bin/python benchmarks/calibrate_variety.py REAL RENDERS [RENDERS ...] [--phi RUN/phi] [--sheet PNG]
+
+--sheet PNG draws what the first directions are: a row each, the 6 real chips lowest along it | the 6 highest.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ AXES = 8
 CHIPS = 32  # a trial's renders
 DRAWS = 16
 FOLDS = 10
+SHEET_ROWS, SHEET_ENDS = 3, 6
 
 
 def held_out_spread(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -38,6 +41,19 @@ def held_out_spread(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         along.append(projected)
         off.append(((phi[fold] - centre) ** 2).sum(1) - (projected ** 2).sum(1))
     return axes, np.sqrt(np.mean(np.concatenate(along) ** 2, axis=0)), float(np.sqrt(np.concatenate(off).mean()))
+
+
+def write_sheet(images: np.ndarray, along: np.ndarray, path: Path) -> None:
+    from PIL import Image
+
+    rows = []
+    for d in range(SHEET_ROWS):
+        order = np.argsort(along[:, d])
+        ends = [*order[:SHEET_ENDS], *order[-SHEET_ENDS:]]
+        rows.append(np.concatenate([images[i] for i in ends], axis=1))
+    Image.fromarray(np.round(np.concatenate(rows) * 255).astype(np.uint8)).save(path)
+    print(f"wrote {path}: a row per direction (1-{SHEET_ROWS}), its {SHEET_ENDS} lowest real chips | its "
+          f"{SHEET_ENDS} highest")
 
 
 def spread(x: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
@@ -55,18 +71,26 @@ def main() -> None:
     ap.add_argument("real", help="the real chips the renders were matched to")
     ap.add_argument("renders", nargs="+", help="folders of renders, or of real chips kept out (more than 32 each)")
     ap.add_argument("--phi", help="φ run folder or checkpoint (default: the shipped φ)")
+    ap.add_argument("--sheet", type=Path, metavar="PNG", help="write the real chips at each end of the first "
+                                                              f"{SHEET_ROWS} directions here")
     args = ap.parse_args()
 
     encoder = as_encoder(args.phi)
 
-    def features(folder: str) -> np.ndarray:
+    def chips(folder: str) -> np.ndarray:
         paths = image_paths(folder)
         if len(paths) < CHIPS + 1:
             sys.exit(f"{folder}: {len(paths)} chips; at least {CHIPS + 1} needed")
-        return phi_features(encoder, load_images(paths, 128)).astype(np.float64)
+        return load_images(paths, 128)
 
-    real = features(args.real)
+    def features(folder: str) -> np.ndarray:
+        return phi_features(encoder, chips(folder)).astype(np.float64)
+
+    real_images = chips(args.real)
+    real = phi_features(encoder, real_images).astype(np.float64)
     axes, real_along, real_off = held_out_spread(real)
+    if args.sheet:
+        write_sheet(real_images, (real - real.mean(0)) @ axes.T, args.sheet)
     rng = np.random.default_rng(0)
     own = np.mean([precision_recall(real[o[CHIPS:]], real[o[:CHIPS]])[1]
                    for o in (rng.permutation(len(real)) for _ in range(DRAWS))])
@@ -80,7 +104,8 @@ def main() -> None:
         x = features(folder)
         along, off = spread(x, axes)
         ratio = along / real_along
-        recall = np.mean([precision_recall(real, x[rng.permutation(len(x))[:CHIPS]])[1] for _ in range(DRAWS)])
+        draws = np.random.default_rng(1)  # the same draws for each set, wherever it stands in the list
+        recall = np.mean([precision_recall(real, x[draws.permutation(len(x))[:CHIPS]])[1] for _ in range(DRAWS)])
         print(f"| {folder} | {' '.join(f'{r:.2f}' for r in ratio)} | {np.mean(np.log(ratio) ** 2):.2f} | "
               f"{off / real_off:.2f} | {recall:.2f} |")
 
