@@ -211,7 +211,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             while True:
                 spent, done = searched_seconds(study), asked(study)
                 bar.n = min(round(spent), round(budget))
-                # best_value reads the best trial alone; best_trials read every trial, seconds each in a long study
+                # best_value reads the best trial alone; best_trials reads every trial, about a second a batch once
+                # the study holds thousands, outside the search time counted
                 with contextlib.suppress(ValueError):  # none told yet
                     bar.set_postfix(trials=done, best=f"{study.best_value:.3g}")
                 bar.refresh()
