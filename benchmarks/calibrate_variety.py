@@ -11,6 +11,10 @@ that fit a direction spread more along it than any others do.
     .venv/bin/python benchmarks/calibrate_variety.py REAL RENDERS [RENDERS ...] [--phi RUN/phi] [--sheet PNG]
 
 --sheet PNG draws what the first directions are: a row each, the 6 real chips lowest along it | the 6 highest.
+--moves PRESET tells which of a preset's fields move its chips along them: 48 renders of the preset (the same scenes
+each time), and of it with each knob of `sasmi calibrate` halved and doubled, their mean moved along each of the first
+3 directions, in the real chips' sd along it: a field that moves the chips along a direction the preset spans too
+little is the one whose spread to widen.
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ CHIPS = 32  # a trial's renders
 DRAWS = 16
 FOLDS = 10
 SHEET_ROWS, SHEET_ENDS = 3, 6
+MOVE_CHIPS = 48  # renders a setting of --moves
 
 
 def held_out_spread(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -69,10 +74,12 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("real", help="the real chips the renders were matched to")
-    ap.add_argument("renders", nargs="+", help="folders of renders, or of real chips kept out (more than 32 each)")
+    ap.add_argument("renders", nargs="*", help="folders of renders, or of real chips kept out (more than 32 each)")
     ap.add_argument("--phi", help="φ run folder or checkpoint (default: the shipped φ)")
     ap.add_argument("--sheet", type=Path, metavar="PNG", help="write the real chips at each end of the first "
                                                               f"{SHEET_ROWS} directions here")
+    ap.add_argument("--moves", metavar="PRESET", help="which of this preset's fields move its chips along the first "
+                                                      f"{SHEET_ROWS} directions")
     args = ap.parse_args()
 
     encoder = as_encoder(args.phi)
@@ -108,6 +115,42 @@ def main() -> None:
         recall = np.mean([precision_recall(real, x[draws.permutation(len(x))[:CHIPS]])[1] for _ in range(DRAWS)])
         print(f"| {folder} | {' '.join(f'{r:.2f}' for r in ratio)} | {np.mean(np.log(ratio) ** 2):.2f} | "
               f"{off / real_off:.2f} | {recall:.2f} |")
+    if args.moves:
+        moves(args.moves, lambda images: (phi_features(encoder, images) - real.mean(0)) @ axes[:SHEET_ROWS].T
+              / real_along[:SHEET_ROWS])
+
+
+def moves(name: str, along) -> None:
+    """For each knob, the preset's chips' mean moved along the first directions as the knob is halved and doubled."""
+    from sasmi.errors import SasmiError
+    from sasmi.realism.calibrate import CalibrateConfig, render_chips
+    from sasmi.realism.preset_space import KNOBS, apply, start_values
+    from sasmi.scene.preset import Preset, load_preset
+
+    preset = load_preset(name)
+    knobs = tuple(k for k in KNOBS if not k.startswith("targets."))
+    start = start_values(preset.raw, knobs)
+
+    def mean_along(raw: dict) -> np.ndarray:
+        images = render_chips(Preset.from_dict(raw, path=preset.path), MOVE_CHIPS, CalibrateConfig(), seed=3)
+        return along(images).mean(0)
+
+    base = mean_along(preset.raw)
+    print(f"\n{name}: its {MOVE_CHIPS} chips' mean along directions 1-{SHEET_ROWS} "
+          f"{' '.join(f'{b:+.2f}' for b in base)} (real sd); moved by")
+    print("| field | start | halved | doubled |")
+    print("|---|---|---|---|")
+    for knob in knobs:
+        if start[knob] == 0:
+            continue  # halved or doubled, still none
+        cells = []
+        for factor in (0.5, 2.0):
+            try:
+                moved = mean_along(apply(preset.raw, {knob: start[knob] * factor})) - base
+                cells.append(" ".join(f"{m:+.2f}" for m in moved))
+            except SasmiError as e:  # a setting that breaks a rule of the preset in some scene
+                cells.append(f"invalid ({e})")
+        print(f"| {knob} | {start[knob]:.3g} | {cells[0]} | {cells[1]} |")
 
 
 if __name__ == "__main__":
