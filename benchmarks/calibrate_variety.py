@@ -4,9 +4,9 @@ The real chips' 8 principal directions in φ carry what varies most from chip to
 targets: mean level, range fall-off, the scene's scale in pixels). For each folder of renders: its sd along each
 direction over the real chips' (1: as varied), the mean log² of those ratios, its sd off the directions (the rest
 of φ's 1024 dimensions) over the real chips', and recall (the share of the real chips near some render in φ, k = 3,
-as `sasmi calibrate` scores a trial) of 32 renders against the real chips, averaged over 16 draws; the real chips' own recall is that of 32 of them against
-the others. The real chips' sd is measured on chips outside the directions' fit (10 folds), as renders are: the chips
-that fit a direction spread more along it than any others do.
+as `sasmi calibrate` scores a trial) of 32 renders against the real chips, averaged over 16 draws; the real chips'
+own recall is that of 32 of them against the others. The real chips' sd is measured on chips outside the directions'
+fit (10 folds), as renders are: the chips that fit a direction spread more along it than any others do.
 
     .venv/bin/python benchmarks/calibrate_variety.py REAL [RENDERS ...] [--phi RUN/phi] [--sheet PNG] [--moves PRESET]
 
