@@ -34,18 +34,27 @@ SHEET_ROWS, SHEET_ENDS = 3, 6
 MOVE_CHIPS = 48  # renders a setting of --moves
 
 
+def main_directions(phi: np.ndarray) -> np.ndarray:
+    """(AXES, D): the principal directions of a set of chips in φ."""
+    return np.linalg.svd(phi - phi.mean(0), full_matrices=False)[2][:AXES]
+
+
+def along_and_off(centred: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each chip's place along the directions, and its squared distance off them."""
+    projected = centred @ axes.T
+    return projected, (centred ** 2).sum(1) - (projected ** 2).sum(1)
+
+
 def held_out_spread(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """The real chips' main directions, and their sd along them and off them as chips outside the fit see them."""
-    axes = np.linalg.svd(phi - phi.mean(0), full_matrices=False)[2][:AXES]
     along, off = [], []
     for fold in np.array_split(np.random.default_rng(0).permutation(len(phi)), FOLDS):
-        fit = np.setdiff1d(np.arange(len(phi)), fold)
-        centre = phi[fit].mean(0)
-        fitted = np.linalg.svd(phi[fit] - centre, full_matrices=False)[2][:AXES]
-        projected = (phi[fold] - centre) @ fitted.T
+        fit = phi[np.setdiff1d(np.arange(len(phi)), fold)]
+        projected, off_squared = along_and_off(phi[fold] - fit.mean(0), main_directions(fit))
         along.append(projected)
-        off.append(((phi[fold] - centre) ** 2).sum(1) - (projected ** 2).sum(1))
-    return axes, np.sqrt(np.mean(np.concatenate(along) ** 2, axis=0)), float(np.sqrt(np.concatenate(off).mean()))
+        off.append(off_squared)
+    return (main_directions(phi), np.sqrt(np.mean(np.concatenate(along) ** 2, axis=0)),
+            float(np.sqrt(np.concatenate(off).mean())))
 
 
 def write_sheet(images: np.ndarray, along: np.ndarray, path: Path) -> None:
@@ -62,10 +71,8 @@ def write_sheet(images: np.ndarray, along: np.ndarray, path: Path) -> None:
 
 
 def spread(x: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
-    centred = x - x.mean(0)
-    projected = centred @ axes.T
-    off = (centred ** 2).sum(1) - (projected ** 2).sum(1)
-    return projected.std(0, ddof=1), float(np.sqrt(off.sum() / (len(x) - 1)))
+    projected, off_squared = along_and_off(x - x.mean(0), axes)
+    return projected.std(0, ddof=1), float(np.sqrt(off_squared.sum() / (len(x) - 1)))
 
 
 def main() -> None:
