@@ -29,7 +29,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--params", default="default",
                    help=f"comma-separated knobs from: {', '.join(KNOBS)}, and FIELD.spread for the fields "
                         "outside targets; 'default' is all of those plus "
-                        f"{', '.join(k for k in DEFAULT_KNOBS if k.endswith('.spread'))}")
+                        f"{', '.join(k for k in DEFAULT_KNOBS if k.endswith('.spread'))} "
+                        "('default,FIELD.spread' adds one)")
     p.add_argument("--chips", type=int, default=d.chips, help=f"renders per trial (default: {d.chips})")
     p.add_argument("--size", type=int, default=d.size, help=f"render and statistics size (default: {d.size})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per pixel (default: {d.spp})")
@@ -61,11 +62,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
-    from sasmi.realism.preset_space import DEFAULT_KNOBS
+    from sasmi.realism.preset_space import named_knobs
 
-    named = tuple(p.strip() for p in args.params.split(",") if p.strip())
-    params = DEFAULT_KNOBS if args.params == "default" else named
-    cfg = CalibrateConfig(params=params, minutes=args.minutes, trials=args.trials, chips=args.chips,
+    cfg = CalibrateConfig(params=named_knobs(args.params), minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
                           variety_weight=args.variety_weight, spread_correction=not args.plain_fid,
                           workers=args.workers, scheduler=args.scheduler,

@@ -63,6 +63,15 @@ def knob(name: str) -> Knob:
     return KNOBS[name]
 
 
+def named_knobs(text: str) -> tuple[str, ...]:
+    """--params as written: comma-separated knobs, "default" standing for DEFAULT_KNOBS wherever it appears
+    ("default,post.tvg_strength.spread" searches one knob more than the default)."""
+    names: list[str] = []
+    for name in (part.strip() for part in text.split(",")):
+        names.extend(DEFAULT_KNOBS if name == "default" else (name,) if name else ())
+    return tuple(names)
+
+
 def check_knobs(names: tuple[str, ...]) -> tuple[str, ...]:
     if not names:
         raise SasmiError("--params: no parameter given")

@@ -17,7 +17,8 @@ from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
 from sasmi.realism.calibration_objective import phi_references, real_chips, score, spread_corrected_fid
-from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, spread, start_values
+from sasmi.realism.preset_space import (DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, named_knobs, spread,
+                                       start_values)
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
 
 
@@ -73,6 +74,14 @@ def test_unknown_and_repeated_knobs_are_refused():
         check_knobs(("post.gain", "post.gain"))
     with pytest.raises(SasmiError, match="unknown parameter targets.size.spread"):
         check_knobs(("targets.size.spread",))
+
+
+def test_default_in_params_stands_for_the_default_knobs():
+    assert named_knobs("default") == DEFAULT_KNOBS
+    assert named_knobs(" post.gain , sonar.altitude,") == ("post.gain", "sonar.altitude")
+    assert named_knobs("default,post.tvg_strength.spread") == (*DEFAULT_KNOBS, "post.tvg_strength.spread")
+    with pytest.raises(SasmiError, match="twice"):
+        check_knobs(named_knobs("default,post.gain.spread"))
 
 
 def test_renders_grouped_by_structure_land_at_their_scene_index():
