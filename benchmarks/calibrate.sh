@@ -2,13 +2,14 @@
 # The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
 # never saw.
 #   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split: as the
-#      command stands, with the plain φ-FID ratio (--plain-fid), and with it and --variety-weight 1 (the last, as
-#      2 and 3, calibrating the search's best: --contenders 1); 400 renders of each result against the validation
-#      targets: `sasmi stats --check` and the φ-FID ratio beside 400 renders of the hand-matched cylinder_chip.
+#      command stands; over the default knobs but the gain's swing (NO_SWING) as it stands, with the plain φ-FID
+#      ratio (--plain-fid), and with it and --variety-weight 1 (the last, as 2 and 3, calibrating the search's best:
+#      --contenders 1); 400 renders of each result against the validation targets: `sasmi stats --check`, the
+#      φ-FID ratio and the two-sample test beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves; 400 renders against the held-back floors of that sonar.
-#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, as in 1; 400 renders of each
-#      against the validation targets beside cylinder_chip's own.
+#   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1, over NO_SWING, as in 1; 400
+#      renders of each against the validation targets beside cylinder_chip's own.
 #
 #     benchmarks/calibrate.sh [RUNS] [MINUTES] [SONAR]        (defaults: runs 30 sassed)
 set -eu
@@ -21,25 +22,36 @@ FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,s
 seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,\
 seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
 post.speckle_cell_track,post.noise_std,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
+# the default knobs but post.gain_swing, in their order
+NO_SWING=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
+seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,seafloor.rock_radius,\
+post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,\
+post.noise_std,targets.size,targets.burial,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
 
 [ -d "$RUNS/split" ] || $SASMI split $DATA --seed 0 --out "$RUNS/split"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --out "$RUNS/calibrate-muscle"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
-    --plain-fid --out "$RUNS/calibrate-muscle-plain"
+    --params "$NO_SWING" --out "$RUNS/calibrate-muscle-no-swing"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
-    --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
-for run in calibrate-muscle calibrate-muscle-plain calibrate-muscle-variety; do
+    --params "$NO_SWING" --plain-fid --out "$RUNS/calibrate-muscle-plain"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
+    --params "$NO_SWING" --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
+for run in calibrate-muscle calibrate-muscle-no-swing calibrate-muscle-plain calibrate-muscle-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
 $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
 $SASMI render muscle_paper --count 400 --size 128 --out "$RUNS/muscle-renders"
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-plain/renders" \
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" \
+    "$RUNS/calibrate-muscle-no-swing/renders" "$RUNS/calibrate-muscle-plain/renders" \
     "$RUNS/calibrate-muscle-variety/renders" "$RUNS/cylinder-renders" "$RUNS/muscle-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-muscle/evaluate" \
-    --set calibrated="$RUNS/calibrate-muscle/renders" --set plain="$RUNS/calibrate-muscle-plain/renders" \
-    --set variety="$RUNS/calibrate-muscle-variety/renders" \
+    --set calibrated="$RUNS/calibrate-muscle/renders" --set no_swing="$RUNS/calibrate-muscle-no-swing/renders" \
+    --set plain="$RUNS/calibrate-muscle-plain/renders" --set variety="$RUNS/calibrate-muscle-variety/renders" \
     --set cylinder_chip="$RUNS/cylinder-renders" --set muscle_paper="$RUNS/muscle-renders"
+$SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/calibrate-muscle/two-sample" \
+    --set calibrated="$RUNS/calibrate-muscle/renders" --set no_swing="$RUNS/calibrate-muscle-no-swing/renders" \
+    --set cylinder_chip="$RUNS/cylinder-renders"
 
 # one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
 .venv/bin/python - "$DATA" "$RUNS/$SONAR" "$SONAR" <<'PY'
@@ -66,11 +78,11 @@ $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/re
     --check || true
 
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
-    --contenders 1 --out "$RUNS/calibrate-cylinder"
+    --params "$NO_SWING" --contenders 1 --out "$RUNS/calibrate-cylinder"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
-    --plain-fid --contenders 1 --out "$RUNS/calibrate-cylinder-plain"
+    --params "$NO_SWING" --plain-fid --contenders 1 --out "$RUNS/calibrate-cylinder-plain"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --minutes "$MINUTES" \
-    --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-cylinder-variety"
+    --params "$NO_SWING" --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-cylinder-variety"
 for run in calibrate-cylinder calibrate-cylinder-plain calibrate-cylinder-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done

@@ -50,12 +50,11 @@ def main() -> int:
     from sasmi.errors import SasmiError
     from sasmi.realism.calibrate import CalibrateConfig, calibrate
     from sasmi.realism.fit_scene import preset_toml
-    from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, centre, check_knobs, start_values
+    from sasmi.realism.preset_space import apply, centre, check_knobs, named_knobs, start_values
     from sasmi.renderset.write import RenderJob, render_set
     from sasmi.scene.preset import Preset, load_preset
 
-    named = tuple(n.strip() for n in args.params.split(",") if n.strip())
-    params = DEFAULT_KNOBS if args.params == "default" else named
+    params = named_knobs(args.params)
     try:
         check_knobs(params)
     except SasmiError as e:

@@ -14,7 +14,9 @@ fit (10 folds), as renders are: the chips that fit a direction spread more along
 --moves PRESET tells which of a preset's fields move its chips along them: 48 renders of the preset (the same scenes
 each time), and of it with each knob of `sasmi calibrate` halved and doubled, their mean moved along each of the first
 3 directions, in the real chips' sd along it: a field that moves the chips along a direction the preset spans too
-little is the one whose spread to widen.
+little is the one whose spread to widen. Its last column draws each field over its centre x (1 ± 0.5) instead (its
+spread in parentheses): the 48 chips' sd off the main directions over the real chips', and their recall against the
+real chips (48 renders; compare with the preset's own, printed above the table).
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ DRAWS = 16
 FOLDS = 10
 SHEET_ROWS, SHEET_ENDS = 3, 6
 MOVE_CHIPS = 48  # renders a setting of --moves
+WIDE = 0.5  # --moves: a field drawn over its centre x (1 ± WIDE)
 
 
 def main_directions(phi: np.ndarray) -> np.ndarray:
@@ -123,13 +126,15 @@ def main() -> None:
         print(f"| {folder} | {' '.join(f'{r:.2f}' for r in ratio)} | {np.mean(np.log(ratio) ** 2):.2f} | "
               f"{off / real_off:.2f} | {recall:.2f} |")
     if args.moves:
-        moves(args.moves, lambda images: (phi_features(encoder, images) - real.mean(0)) @ axes[:SHEET_ROWS].T
-              / real_along[:SHEET_ROWS])
+        moves(args.moves, lambda images: phi_features(encoder, images).astype(np.float64), real, axes, real_along,
+              real_off)
 
 
-def moves(name: str, along) -> None:
-    """For each knob, the preset's chips' mean moved along the first directions as the knob is halved and doubled."""
+def moves(name: str, features, real: np.ndarray, axes: np.ndarray, real_along: np.ndarray, real_off: float) -> None:
+    """For each knob, the preset's chips' mean moved along the first directions as the knob is halved and doubled,
+    and their spread off the main directions and recall with the knob drawn over centre x (1 ± WIDE)."""
     from sasmi.errors import SasmiError
+    from sasmi.eval.manifold import precision_recall
     from sasmi.realism.calibrate import CalibrateConfig, render_chips
     from sasmi.realism.preset_space import KNOBS, apply, start_values
     from sasmi.scene.preset import Preset, load_preset
@@ -137,27 +142,34 @@ def moves(name: str, along) -> None:
     preset = load_preset(name)
     knobs = tuple(k for k in KNOBS if not k.startswith("targets."))
     start = start_values(preset.raw, knobs)
+    widths = start_values(preset.raw, tuple(f"{k}.spread" for k in knobs))
 
-    def mean_along(raw: dict) -> np.ndarray:
-        images = render_chips(Preset.from_dict(raw, path=preset.path), MOVE_CHIPS, CalibrateConfig(), seed=3)
-        return along(images).mean(0)
+    def measure(raw: dict) -> tuple[np.ndarray, float, float]:
+        x = features(render_chips(Preset.from_dict(raw, path=preset.path), MOVE_CHIPS, CalibrateConfig(), seed=3))
+        mean_along = ((x - real.mean(0)) @ axes[:SHEET_ROWS].T / real_along[:SHEET_ROWS]).mean(0)
+        return mean_along, spread(x, axes)[1] / real_off, precision_recall(real, x)[1]
 
-    base = mean_along(preset.raw)
+    def cell(raw_of) -> tuple[str, str]:
+        try:
+            along, off, recall = measure(raw_of())
+        except SasmiError as e:  # a setting that breaks a rule of the preset in some scene
+            return (f"invalid ({e})",) * 2
+        return " ".join(f"{m:+.2f}" for m in along - base), f"{off:.2f}, {recall:.2f}"
+
+    base, base_off, base_recall = measure(preset.raw)
     print(f"\n{name}: its {MOVE_CHIPS} chips' mean along directions 1-{SHEET_ROWS} "
-          f"{' '.join(f'{b:+.2f}' for b in base)} (real sd); moved by")
-    print("| field | start | halved | doubled |")
-    print("|---|---|---|---|")
+          f"{' '.join(f'{b:+.2f}' for b in base)} (real sd), sd off the {AXES} directions {base_off:.2f} of the "
+          f"real chips', recall {base_recall:.2f}; moved by")
+    print(f"| field | start (spread) | halved | doubled | drawn over ± {WIDE:g}: sd off ÷ real, recall |")
+    print("|---|---|---|---|---|")
     for knob in knobs:
         if start[knob] == 0:
-            continue  # halved or doubled, still none
-        cells = []
-        for factor in (0.5, 2.0):
-            try:
-                moved = mean_along(apply(preset.raw, {knob: start[knob] * factor})) - base
-                cells.append(" ".join(f"{m:+.2f}" for m in moved))
-            except SasmiError as e:  # a setting that breaks a rule of the preset in some scene
-                cells.append(f"invalid ({e})")
-        print(f"| {knob} | {start[knob]:.3g} | {cells[0]} | {cells[1]} |")
+            continue  # halved, doubled or drawn around it, still none
+        halved, _ = cell(lambda: apply(preset.raw, {knob: start[knob] * 0.5}))
+        doubled, _ = cell(lambda: apply(preset.raw, {knob: start[knob] * 2.0}))
+        _, wide = cell(lambda: apply(preset.raw, {f"{knob}.spread": WIDE}))
+        print(f"| {knob} | {start[knob]:.3g} ({widths[knob + '.spread']:.2f}) | "
+              f"{halved} | {doubled} | {wide} |")
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ from sasmi.labels import ChipLabel
 from sasmi.chips.stats import chip_statistics, floor_level
 from sasmi.realism.display import bent
 from sasmi.realism.seabeds import draw_floor, seabed_of, speckle_of
+from sasmi.render.post import swing_noise
 
 # floor-only statistics of `sasmi stats`; the target-shaped ones say nothing of a floor. far_near: seafloor chips
 # may fall off less along range than target chips, and the composites (and the GAN trained on them) keep the floor's
@@ -135,9 +136,8 @@ def on_floor(render01: np.ndarray, mask: np.ndarray, floor01: np.ndarray) -> np.
 
 def gain_bands(rows: int, rng: np.random.Generator) -> np.ndarray:
     """(rows,) > 0: a gain per row along track, exp(s * noise) with s in [0, BANDS] and the noise correlated over BAND_LENGTH."""
-    pad = int(4 * BAND_LENGTH)
-    noise = ndimage.gaussian_filter1d(rng.standard_normal(rows + 2 * pad), BAND_LENGTH)[pad:pad + rows]
-    return np.exp(rng.uniform(0.0, BANDS) * noise / max(noise.std(), 1e-9))
+    noise = swing_noise(rng, rows, BAND_LENGTH)
+    return np.exp(rng.uniform(0.0, BANDS) * noise)
 
 
 def fresh_floor(seabed01: np.ndarray, speckle01: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The sonar's image formation after the render: time-varying gain, speckle, noise floor, noise.
+"""The sonar's image formation after the render: time-varying gain, speckle, gain swings, noise floor, noise.
 
 Radiance (H, W), exposure folded in, goes to a chip in [0, 1] as
     clip((radiance * gain + noise_floor) * speckle + noise, 0, 1)
@@ -13,6 +13,7 @@ import math
 from functools import lru_cache
 
 import numpy as np
+from scipy import ndimage
 
 from sasmi.render.geometry import Geometry, exposure, flat_floor_irradiance
 from sasmi.scene.model import Scene
@@ -68,6 +69,13 @@ def _interp_uniform(x: np.ndarray, z: np.ndarray, q: np.ndarray) -> np.ndarray:
     return q[left] + (position - left) * (q[left + 1] - q[left])
 
 
+def swing_noise(rng: np.random.Generator, rows: int, length: float) -> np.ndarray:
+    """(rows,) Gaussian noise along track of unit sd, correlated over `length` px (a Gaussian's sigma)."""
+    pad = int(4 * length)
+    noise = ndimage.gaussian_filter1d(rng.standard_normal(rows + 2 * pad), length)[pad:pad + rows]
+    return noise / max(noise.std(), 1e-9)
+
+
 def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) speckle (mean 1; all 1 when off) and offset (noise floor x speckle + noise; gray levels).
 
@@ -75,6 +83,9 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     std / mean = patchiness, patches of `patch_size`): the compound (K-distribution) model of
     seafloor clutter, where the sediment's backscatter strength varies in patches under the
     speckle. It multiplies every echo, as the speckle does; the noise floor stays untextured.
+    With `post.gain_swing` each row along track (a ping) is multiplied by exp(gain_swing x n), n
+    of unit sd correlated over `gain_swing_length`: the swath's gain swinging from ping to ping,
+    which real chips show as rows brighter or darker as a whole. It too spares the noise floor.
     """
     post = scene.post
     rng = np.random.default_rng([scene.seed, 11])
@@ -95,6 +106,9 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
         sigma = floor.patch_size / pixel / FWHM_PER_SIGMA
         speckle = speckle * correlated_gamma(np.random.default_rng([scene.seed, 12]), floor.patchiness**-2, size,
                                              sigma, sigma)
+    if post.gain_swing > 0:  # its own stream too
+        rows = swing_noise(np.random.default_rng([scene.seed, 13]), size, post.gain_swing_length / pixel)
+        speckle = speckle * np.exp(post.gain_swing * rows)[:, None]
     return speckle, offset
 
 

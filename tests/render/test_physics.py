@@ -148,6 +148,36 @@ def test_patchiness_textures_the_floor_in_patches_of_patch_size():
     assert post_fields(textured, size)[0].var() > 1.2 * post_fields(speckled, size)[0].var()
 
 
+def test_gain_swing_brightens_and_darkens_whole_rows_along_track():
+    """post.gain_swing / gain_swing_length: each row along track times exp(gain_swing x n), n of unit sd
+    correlated over gain_swing_length, from its own stream (the speckle under it is the same); the noise floor
+    is spared; `sasmi stats` measures it as the gain swing along track."""
+    from sasmi.chips.stats import gain_swing
+    from sasmi.render.post import post_fields
+
+    size = 128
+    pixel = 6.0 / size
+    speckled = dataclasses.replace(flat_chip(post=Post(speckle_looks=4.0, noise_floor=0.02), targets=()), seed=3)
+
+    def swung(sd: float, length: float) -> Scene:
+        return dataclasses.replace(speckled, post=dataclasses.replace(speckled.post, gain_swing=sd,
+                                                                      gain_swing_length=length))
+
+    plain, plain_offset = post_fields(speckled, size)
+    banded, offset = post_fields(swung(0.1, 3 * pixel), size)
+    np.testing.assert_array_equal(offset, plain_offset)
+    log_rows = np.log(banded / plain)
+    np.testing.assert_allclose(log_rows, log_rows[:, :1] * np.ones((1, size)), atol=1e-12)  # whole rows
+    rows = log_rows[:, 0]
+    assert rows.std() == pytest.approx(0.1, rel=1e-6)
+    lag = np.corrcoef(rows[:-3], rows[3:])[0, 1]  # exp(-3² / (4 · 3²)) = 0.78 for a Gaussian of sigma 3 px
+    assert 0.6 < lag < 0.9, lag
+    short = np.log(post_fields(swung(0.1, 0.5 * pixel), size)[0] / plain)[:, 0]
+    assert np.corrcoef(short[:-3], short[3:])[0, 1] < 0.2
+    floor = np.ones((size, size), bool)
+    assert gain_swing(0.3 * banded.clip(0, 3) / 3, floor) > gain_swing(0.3 * plain.clip(0, 3) / 3, floor) + 0.05
+
+
 def test_lambert_squared_backscatter_sharpens_the_relief(renderer64):
     """seafloor.backscatter = lambert2 weighs each facet by cos^2(incidence): tilted facets stand out more
     (relief contrast std / mean); rough (cos^0.5) evens them out; a flat floor keeps its calibrated level
