@@ -1,8 +1,9 @@
 """The sonar's image formation after the render: time-varying gain, speckle, gain swings, noise floor, noise.
 
 Radiance (H, W), exposure folded in, goes to a chip in [0, 1] as
-    clip((radiance * gain + noise_floor) * speckle + noise, 0, 1)
-    = clip(radiance * gain * speckle + offset, 0, 1),   offset = noise_floor * speckle + noise
+    clip((radiance * gain * swing + noise_floor) * speckle + noise, 0, 1)
+    = clip(radiance * gain * echo + offset, 0, 1),   echo = swing * speckle,   offset = noise_floor * speckle + noise
+(the swing, a gain per row along track, is 1 when off; the speckle map `post_fields` returns is the echo's).
 The maps are numpy and depend only on the scene, so `Renderer.render` computes them while
 the Mitsuba kernel runs, and the differentiable render reuses the same speckle and offset.
 docs/physics.md says what each models.
