@@ -7,9 +7,9 @@ scores them against the real chips:
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
                 + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
-d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes; the
-target sizes, the share of chips with a target and the shadow level count only where most real chips show a
-target); the φ-FID ratio is the renders' FID to the real chips in φ over that of as many real chips to the rest
+d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes), and
+the gain's swing along track; the target sizes, the share of chips with a target, the shadow level and the target's
+offset from the centre row count only where most real chips show a target (sasmi.chips.compare); the φ-FID ratio is the renders' FID to the real chips in φ over that of as many real chips to the rest
 (1: as close as real chips are to each other), the renders' FID less the part of its small-sample bias that their
 own spread adds beyond the real chips' (else renders too alike would score better than real chips); the objective
 and its parts: sasmi/realism/calibration_objective.py. The first term pins what the statistics measure, the second the
@@ -198,7 +198,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         record = {"real": str(Path(real_folder).resolve()), "start": str(preset.path.resolve()),
                   "phi": describe_phi(encoder), "identity": {**cfg.identity(), "params": list(cfg.params),
                                                              "real": str(Path(real_folder).resolve()),
-                                                             "start": str(preset.path.resolve())}}
+                                                             "start": str(preset.path.resolve()),
+                                                             "statistics": list(real.checked)}}
         _check_record(out, record)
         x0 = start_values(preset.raw, cfg.params)
         study = open_study(out, cfg, x0)

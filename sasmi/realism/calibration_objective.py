@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sasmi.chips.compare import TARGET_EXTRAS, TOLERANCES
+from sasmi.chips.compare import FLOOR_EXTRAS, TARGET_EXTRAS, TOLERANCES
 from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError
 
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
-OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS}  # the tolerances a calibration matches
+OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS, **FLOOR_EXTRAS}  # the tolerances a calibration matches
 # share of a set's half-split FID that its own spread adds to its FID to others: n chips add about c x spread / n,
 # each half of n / 2 adds 2c x spread / n, so the two halves carry 4 times the set's share (BIAS_SHARE = 1 / 4)
 BIAS_SHARE = 0.25

@@ -1,8 +1,8 @@
 """The knobs `sasmi calibrate` turns: a preset's fields as numbers a derivative-free search can move.
 
 A knob is a preset field ("post.gain") whose centre is searched over a physical range that holds any
-sonar's value, so every start preset lies inside it; `targets.size` and `targets.burial` are factors on
-every [[targets]] kind's sizes or burial depths (1 = the start). "FIELD.spread" searches how widely the
+sonar's value, so every start preset lies inside it; `targets.size`, `targets.burial` and `targets.track_offset`
+are factors on every [[targets]] kind's sizes, burial depths or along-track positions (1 = the start). "FIELD.spread" searches how widely the
 field is drawn around its centre: uniform over centre x (1 ± spread), 0 being a fixed value. A knob
 left out keeps the start preset's value and spread. docs/calibrate.md lists them and why each range.
 """
@@ -48,10 +48,14 @@ KNOBS: dict[str, Knob] = {
     "targets.size": Knob(0.25, 4.0, True),  # a factor on every size of every [[targets]] kind
     "targets.burial": Knob(0.0, 1.0, False),  # a factor on every kind's burial: no deeper than the start's,
                                               # which keeps every draw's target above the floor
+    # a factor on every kind's y: real target chips are cut centred on the contact, and a chip's pixel size moves
+    # with sonar.chip_size, so a target's offset in pixels needs a knob of its own
+    "targets.track_offset": Knob(0.02, 4.0, True),
 }
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole
 TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale", "burial")
+TARGET_FIELDS = {"targets.size": TARGET_SIZES, "targets.burial": ("burial",), "targets.track_offset": ("y",)}
 DEFAULT_KNOBS = (*KNOBS, "post.gain.spread", "seafloor.albedo.spread", "sonar.altitude.spread")
 
 
@@ -167,7 +171,7 @@ def apply(raw: dict, values: dict[str, float]) -> dict:
     raw = copy.deepcopy(explicit_geometry(raw))
     for name, v in values.items():
         if name.startswith("targets."):
-            keys = TARGET_SIZES if name == "targets.size" else ("burial",)
+            keys = TARGET_FIELDS[name]
             tables = [*raw.get("targets", []), raw.get("target_grid", {}).get("target", {})]
             for table in tables:
                 for key in keys:

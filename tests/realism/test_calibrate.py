@@ -41,7 +41,8 @@ def test_start_values_rebuild_the_start_preset(name):
 
 def test_knobs_move_the_fields_they_name():
     raw = load_preset("cylinder_chip").raw
-    moved = apply(raw, {"post.gain": 0.2, "post.gain.spread": 0.5, "targets.size": 2.0, "sonar.near_range": 80.0})
+    moved = apply(raw, {"post.gain": 0.2, "post.gain.spread": 0.5, "targets.size": 2.0, "sonar.near_range": 80.0,
+                        "targets.track_offset": 0.25})
     assert moved["post"]["gain"] == {"uniform": [0.1, 0.3]}
     assert spread(moved["post"]["gain"]) == pytest.approx(0.5)
     for before, after in zip(raw["targets"], moved["targets"]):
@@ -49,6 +50,9 @@ def test_knobs_move_the_fields_they_name():
             if key in before:
                 assert centre(after[key]) == pytest.approx(2 * centre(before[key]), rel=1e-3)
         assert after["yaw"] == before["yaw"] if "yaw" in before else True
+        assert after["x"] == before["x"] if "x" in before else True
+        if "y" in before:  # a normal's mean and sd, or a uniform's ends, a quarter as far from the centre row
+            assert next(iter(after["y"].values())) == pytest.approx([v / 4 for v in next(iter(before["y"].values()))])
     far = max(moved["sonar"]["near_range"]["uniform"]) + moved["sonar"]["chip_size"]
     assert moved["sonar"]["max_range"] >= far  # the chip stays in range
     assert raw["post"]["gain"] == {"uniform": [0.22, 0.68]}  # the start is not changed in place
@@ -189,6 +193,30 @@ def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_
     assert score(alike, real, encoder, 1.0)["recall"] < 0.2
 
 
+def test_the_objective_charges_targets_off_the_centre_row_and_a_missing_gain_swing(tmp_path):
+    """Real chips with centred targets and a gain swing: new draws of their preset match both; the same preset with
+    its targets spread ±2 m along track misses the offset alone, and without the swing misses the swing alone."""
+    from sasmi.eval.features import as_encoder
+
+    swung = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\n"
+    variants = {"truth": swung, "off_centre": swung.replace('shape = "cylinder"', 'shape = "cylinder"\ny = {uniform = '
+                                                                                  '[-2.0, 2.0]}'),
+                "no_swing": swung.replace("gain_swing = 0.15", "gain_swing = 0.0")}
+    cfg = CalibrateConfig(chips=24, size=64)
+    real_folder = tmp_path / "real"
+    real_folder.mkdir()
+    for i, image in enumerate(render_chips(Preset.from_dict(tomllib.loads(swung)), 40, cfg, seed=5)):
+        Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
+    encoder = as_encoder(None)
+    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
+    assert {"offset_track", "bands"} <= set(real.checked)
+    distances = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
+                             1.0)["distances"] for name, text in variants.items()}
+    assert distances["truth"]["offset_track"] <= 1 and distances["truth"]["bands"] <= 1, distances["truth"]
+    assert distances["off_centre"]["offset_track"] > 1.5 and distances["off_centre"]["bands"] <= 1, distances
+    assert distances["no_swing"]["bands"] > 1.5 and distances["no_swing"]["offset_track"] <= 1, distances
+
+
 def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_path):
     real, start = known
     cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16)
@@ -217,6 +245,15 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
 
     with pytest.raises(SasmiError, match="other settings \\(chips\\)"):
         calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "chips": 20}), out, progress=False)
+    # a study whose objective matched other statistics (another sasmi's) is not continued under this one's
+    kept = (out / "calibrate.json").read_text()
+    record = json.loads(kept)
+    assert "offset_track" in record["identity"]["statistics"]
+    record["identity"]["statistics"].remove("offset_track")
+    (out / "calibrate.json").write_text(json.dumps(record))
+    with pytest.raises(SasmiError, match="other settings \\(statistics\\)"):
+        calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "trials": 30}), out, progress=False)
+    (out / "calibrate.json").write_text(kept)
     # the φ term is part of what a rerun must share: --plain-fid is named among the settings that differ
     refused = {}
     for flag in ([], ["--plain-fid"]):
