@@ -2,9 +2,10 @@
 
 A knob is a preset field ("post.gain") whose centre is searched over a physical range that holds any
 sonar's value, so every start preset lies inside it; `targets.size`, `targets.burial` and `targets.track_offset`
-are factors on every [[targets]] kind's sizes, burial depths or along-track positions (1 = the start). "FIELD.spread" searches how widely the
-field is drawn around its centre: uniform over centre x (1 ± spread), 0 being a fixed value. A knob
-left out keeps the start preset's value and spread. docs/calibrate.md lists them and why each range.
+are factors on every [[targets]] kind's sizes, burial depths or along-track positions (1 = the start).
+"FIELD.spread" searches how widely the field is drawn around its centre: uniform over centre x (1 ± spread), 0
+being a fixed value. A knob left out keeps the start preset's value and spread. docs/calibrate.md lists them and
+why each range.
 """
 from __future__ import annotations
 
