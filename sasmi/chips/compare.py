@@ -29,19 +29,21 @@ class Tolerance:
         if not (math.isfinite(reference) and math.isfinite(other)):
             return False
         if self.kind == "ratio":
-            return reference > 0 and self.low <= other / reference <= self.high
+            if reference <= 0 or other <= 0:
+                return reference == other == 0  # a statistic both lack (no gain swing) matches
+            return self.low <= other / reference <= self.high
         if self.kind == "diff":
             return abs(other - reference) <= self.high
         return other <= self.high
 
     def distance(self, reference: float, other: float) -> float:
         """How many tolerances `other` lies from `reference`: <= 1 where `holds`, inf where either is
-        missing. A ratio counts on a log scale: half and double the reference are equally far."""
+        missing. A ratio counts on a log scale: half and double the reference are equally far; two zeros match."""
         if not (math.isfinite(reference) and math.isfinite(other)):
             return math.inf
         if self.kind == "ratio":
             if reference <= 0 or other <= 0:
-                return math.inf
+                return 0.0 if reference == other == 0 else math.inf
             r = math.log(other / reference)
             return r / math.log(self.high) if r >= 0 else r / math.log(self.low)
         if self.kind == "diff":
