@@ -7,12 +7,12 @@ scores them against the real chips:
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
                 + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
-d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes), and
-the gain's swing along track; the target sizes, the share of chips with a target, the shadow level and the target's
-offset from the centre row count only where most real chips show a target (sasmi.chips.compare); the φ-FID ratio
-is the renders' FID to the real chips in φ over that of as many real chips to the rest (1: as close as real chips
-are to each other), the renders' FID less the part of its small-sample bias that their own spread adds beyond the
-real chips' (else renders too alike would score better than real chips); the objective and its parts:
+d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes), and the
+gain's swing along track and the share of chips with a target found; the target sizes, the shadow level and the
+target's offset from the centre row count only where most real chips show a target (sasmi.chips.compare); the φ-FID
+ratio is the renders' FID to the real chips in φ over that of as many real chips to the rest (1: as close as real
+chips are to each other), the renders' FID less the part of its small-sample bias that their own spread adds beyond
+the real chips' (else renders too alike would score better than real chips); the objective and its parts:
 sasmi/realism/calibration_objective.py. The first term pins what the statistics measure, the second the whole
 distribution of looks; the third (off by default: docs/calibrate.md) keeps them as varied as the real chips, which
 the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a

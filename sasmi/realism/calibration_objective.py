@@ -48,8 +48,11 @@ def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, dr
         raise SasmiError(f"--real {folder}: {len(images)} chips; calibrating with --chips {chips} needs at "
                          f"least {chips + 8}")
     phi = phi_features(encoder, images)
-    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
-    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
+    # seafloor chips: a target statistic is a false alarm's size, but how often one is found still counts, so that
+    # ripple crests and rocks do not read as targets on a floor whose real chips show none
+    targets = stats["targets_found"] >= 0.5
+    checked = tuple(k for k in OBJECTIVE
+                    if targets or k == "targets_found" or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
     values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
     return RealChips(Path(folder), values, checked, phi, images=images, **phi_references(phi, chips, seed, draws))
 

@@ -220,6 +220,27 @@ def test_the_objective_charges_targets_off_the_centre_row_and_a_missing_gain_swi
     assert distances["no_swing"]["bands"] > 1.5 and distances["no_swing"]["offset_track"] <= 1, distances
 
 
+def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_sizes(tmp_path):
+    """Real floor chips without a target: a target's sizes are not matched, but renders that show one where the real
+    floors show none (ripple crests and rocks read as targets) miss the share of chips with a target."""
+    from sasmi.eval.features import as_encoder
+
+    with_target = PRESET.replace("GAIN", "0.3")
+    floor = with_target.split("[[targets]]")[0] + "[post]" + with_target.split("[post]")[1]
+    cfg = CalibrateConfig(chips=24, size=64)
+    real_folder = tmp_path / "real"
+    real_folder.mkdir()
+    for i, image in enumerate(render_chips(Preset.from_dict(tomllib.loads(floor)), 40, cfg, seed=5)):
+        Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
+    encoder = as_encoder(None)
+    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
+    assert "targets_found" in real.checked and not {"shadow_length", "offset_track"} & set(real.checked)
+    distances = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
+                             1.0)["distances"] for name, text in {"floor": floor, "target": with_target}.items()}
+    assert distances["floor"]["targets_found"] <= 1, distances["floor"]
+    assert distances["target"]["targets_found"] > 2, distances["target"]
+
+
 def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_path):
     real, start = known
     cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16)
