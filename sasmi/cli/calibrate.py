@@ -14,7 +14,7 @@ from pathlib import Path
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from sasmi.cli.render import scheduler_address
     from sasmi.realism.calibrate import SAMPLERS, CalibrateConfig
-    from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS
+    from sasmi.realism.preset_space import DEFAULT_KNOBS, KNOBS, NAMED_ONLY
 
     d = CalibrateConfig()
     p = sub.add_parser("calibrate", help="fit a preset to a folder of real chips (derivative-free search)",
@@ -28,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trials", type=int, help="or stop after this many trials (default: no limit)")
     p.add_argument("--params", default="default",
                    help=f"comma-separated knobs from: {', '.join(KNOBS)}, and FIELD.spread for the fields "
-                        "outside targets; 'default' is all of those plus "
+                        f"outside targets; 'default' is all of those but {', '.join(NAMED_ONLY)}, plus "
                         f"{', '.join(k for k in DEFAULT_KNOBS if k.endswith('.spread'))} "
                         "('default,FIELD.spread' adds one)")
     p.add_argument("--chips", type=int, default=d.chips, help=f"renders per trial (default: {d.chips})")

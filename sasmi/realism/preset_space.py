@@ -53,11 +53,16 @@ KNOBS: dict[str, Knob] = {
     # with sonar.chip_size, so a target's offset in pixels needs a knob of its own
     "targets.track_offset": Knob(0.02, 4.0, True),
 }
+# searched only when named: a floor whose backscatter varies in patches (seabed boundaries, K-distributed clutter),
+# which other sonars' floors show and which moved renders off the MILCO chips (docs/matching.md)
+NAMED_ONLY = {"seafloor.patchiness": Knob(0.0, 1.5, False, 2.0), "seafloor.patch_size": Knob(0.3, 20.0, True)}
+KNOBS.update(NAMED_ONLY)
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole
 TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale", "burial")
 TARGET_FIELDS = {"targets.size": TARGET_SIZES, "targets.burial": ("burial",), "targets.track_offset": ("y",)}
-DEFAULT_KNOBS = (*KNOBS, "post.gain.spread", "seafloor.albedo.spread", "sonar.altitude.spread")
+DEFAULT_KNOBS = (*(k for k in KNOBS if k not in NAMED_ONLY), "post.gain.spread", "seafloor.albedo.spread",
+                 "sonar.altitude.spread")
 
 
 def knob(name: str) -> Knob:
