@@ -35,7 +35,6 @@ KNOBS: dict[str, Knob] = {
     "seafloor.albedo": Knob(0.05, 0.95, True, 1.0),
     "seafloor.rms_height": Knob(0.001, 0.1, True),
     "seafloor.correlation_length": Knob(0.1, 10.0, True),
-    "seafloor.ripple_amplitude": Knob(0.0, 0.05, False),
     "seafloor.rocks": Knob(0.0, 60.0, False, whole=True),
     "seafloor.rock_radius": Knob(0.03, 1.0, True),
     "post.gain": Knob(0.03, 2.0, True),
@@ -53,9 +52,11 @@ KNOBS: dict[str, Knob] = {
     # with sonar.chip_size, so a target's offset in pixels needs a knob of its own
     "targets.track_offset": Knob(0.02, 4.0, True),
 }
-# searched only when named: a floor whose backscatter varies in patches (seabed boundaries, K-distributed clutter),
-# which other sonars' floors show and which moved renders off the MILCO chips (docs/matching.md)
-NAMED_ONLY = {"seafloor.patchiness": Knob(0.0, 1.5, False, 2.0), "seafloor.patch_size": Knob(0.3, 20.0, True)}
+# searched only when named: what some seabeds show and others not at all. Sand ripples: stripes a few px apart that
+# neither φ nor the statistics see but a classifier tells from real MILCO chips at once (docs/calibrate.md); a floor
+# whose backscatter varies in patches (seabed boundaries), which moved renders off the MILCO chips (docs/matching.md)
+NAMED_ONLY = {"seafloor.ripple_amplitude": Knob(0.0, 0.05, False), "seafloor.patchiness": Knob(0.0, 1.5, False, 2.0),
+              "seafloor.patch_size": Knob(0.3, 20.0, True)}
 KNOBS.update(NAMED_ONLY)
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole

@@ -84,8 +84,8 @@ def test_default_in_params_stands_for_the_default_knobs():
     assert named_knobs("default") == DEFAULT_KNOBS
     assert named_knobs(" post.gain , sonar.altitude,") == ("post.gain", "sonar.altitude")
     assert named_knobs("default,post.tvg_strength.spread") == (*DEFAULT_KNOBS, "post.tvg_strength.spread")
-    # the floor's patches are searched where named, and the knobs they name write a valid preset
-    assert not {"seafloor.patchiness", "seafloor.patch_size"} & set(DEFAULT_KNOBS)
+    # ripples and the floor's patches are searched where named, and the knobs they name write a valid preset
+    assert not {"seafloor.ripple_amplitude", "seafloor.patchiness", "seafloor.patch_size"} & set(DEFAULT_KNOBS)
     names = check_knobs(named_knobs("default,seafloor.patchiness,seafloor.patch_size"))
     raw = apply(load_preset("seafloor_only").raw, {"seafloor.patchiness": 0.6, "seafloor.patch_size": 4.0,
                                                    "seafloor.patchiness.spread": 0.5})
