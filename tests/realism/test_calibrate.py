@@ -204,25 +204,31 @@ def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_
     assert score(alike, real, encoder, 1.0)["recall"] < 0.2
 
 
+def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path):
+    """40 renders of preset text `truth` as the real chips; each variant's 24 renders of other scenes scored against
+    them: (the real chips, variant -> the objective's tolerance distances)."""
+    from sasmi.eval.features import as_encoder
+
+    cfg = CalibrateConfig(chips=24, size=64)
+    real_folder = tmp_path / "real"
+    real_folder.mkdir()
+    for i, image in enumerate(render_chips(Preset.from_dict(tomllib.loads(truth)), 40, cfg, seed=5)):
+        Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
+    encoder = as_encoder(None)
+    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
+    return real, {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
+                              1.0)["distances"] for name, text in variants.items()}
+
+
 def test_the_objective_charges_targets_off_the_centre_row_and_a_missing_gain_swing(tmp_path):
     """Real chips with centred targets and a gain swing: new draws of their preset match both; the same preset with
     its targets spread ±2 m along track misses the offset alone, and without the swing misses the swing alone."""
-    from sasmi.eval.features import as_encoder
-
     swung = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\n"
     variants = {"truth": swung, "off_centre": swung.replace('shape = "cylinder"', 'shape = "cylinder"\ny = {uniform = '
                                                                                   '[-2.0, 2.0]}'),
                 "no_swing": swung.replace("gain_swing = 0.15", "gain_swing = 0.0")}
-    cfg = CalibrateConfig(chips=24, size=64)
-    real_folder = tmp_path / "real"
-    real_folder.mkdir()
-    for i, image in enumerate(render_chips(Preset.from_dict(tomllib.loads(swung)), 40, cfg, seed=5)):
-        Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
-    encoder = as_encoder(None)
-    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
+    real, distances = distances_to_renders_of(swung, variants, tmp_path)
     assert {"offset_track", "bands"} <= set(real.checked)
-    distances = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
-                             1.0)["distances"] for name, text in variants.items()}
     assert distances["truth"]["offset_track"] <= 1 and distances["truth"]["bands"] <= 1, distances["truth"]
     assert distances["off_centre"]["offset_track"] > 1.5 and distances["off_centre"]["bands"] <= 1, distances
     assert distances["no_swing"]["bands"] > 1.5 and distances["no_swing"]["offset_track"] <= 1, distances
@@ -231,20 +237,10 @@ def test_the_objective_charges_targets_off_the_centre_row_and_a_missing_gain_swi
 def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_sizes(tmp_path):
     """Real floor chips without a target: a target's sizes are not matched, but renders that show one where the real
     floors show none (ripple crests and rocks read as targets) miss the share of chips with a target."""
-    from sasmi.eval.features import as_encoder
-
     with_target = PRESET.replace("GAIN", "0.3")
     floor = with_target.split("[[targets]]")[0] + "[post]" + with_target.split("[post]")[1]
-    cfg = CalibrateConfig(chips=24, size=64)
-    real_folder = tmp_path / "real"
-    real_folder.mkdir()
-    for i, image in enumerate(render_chips(Preset.from_dict(tomllib.loads(floor)), 40, cfg, seed=5)):
-        Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
-    encoder = as_encoder(None)
-    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
+    real, distances = distances_to_renders_of(floor, {"floor": floor, "target": with_target}, tmp_path)
     assert "targets_found" in real.checked and not {"shadow_length", "offset_track"} & set(real.checked)
-    distances = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
-                             1.0)["distances"] for name, text in {"floor": floor, "target": with_target}.items()}
     assert distances["floor"]["targets_found"] <= 1, distances["floor"]
     assert distances["target"]["targets_found"] > 2, distances["target"]
 
