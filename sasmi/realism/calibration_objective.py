@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sasmi.chips.compare import FLOOR_EXTRAS, TARGET_EXTRAS, TOLERANCES
+from sasmi.chips.compare import EVERY_CHIP_EXTRAS, TARGET_EXTRAS, TOLERANCES
 from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError
 
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
-OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS, **FLOOR_EXTRAS}  # the tolerances a calibration matches
+OBJECTIVE = {**TOLERANCES, **TARGET_EXTRAS, **EVERY_CHIP_EXTRAS}  # the tolerances a calibration matches
 # share of a set's half-split FID that its own spread adds to its FID to others: n chips add about c x spread / n,
 # each half of n / 2 adds 2c x spread / n, so the two halves carry 4 times the set's share (BIAS_SHARE = 1 / 4)
 BIAS_SHARE = 0.25
@@ -48,11 +48,8 @@ def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, dr
         raise SasmiError(f"--real {folder}: {len(images)} chips; calibrating with --chips {chips} needs at "
                          f"least {chips + 8}")
     phi = phi_features(encoder, images)
-    # seafloor chips: a target statistic is a false alarm's size, but how often one is found still counts, so that
-    # ripple crests and rocks do not read as targets on a floor whose real chips show none
-    targets = stats["targets_found"] >= 0.5
-    checked = tuple(k for k in OBJECTIVE
-                    if targets or k == "targets_found" or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
+    targets = stats["targets_found"] >= 0.5  # seafloor chips: a target statistic is a false alarm's size
+    checked = tuple(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS))
     values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
     return RealChips(Path(folder), values, checked, phi, images=images, **phi_references(phi, chips, seed, draws))
 
