@@ -26,8 +26,9 @@ DATA=../shared/data/sonar-chips
 FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,\
 seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,\
 seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
-post.speckle_cell_track,post.noise_std,post.gain_swing,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
-# the default knobs but post.gain_swing, in their order
+post.speckle_cell_track,post.noise_std,post.gain_swing,post.speckle_wander,post.gain.spread,seafloor.albedo.spread,\
+sonar.altitude.spread
+# the default knobs of commit 80abb38 (ripples among them, no track offset) but post.gain_swing, in their order
 NO_SWING=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
 seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,seafloor.rock_radius,\
 post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,\

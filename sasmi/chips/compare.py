@@ -76,9 +76,12 @@ TOLERANCES = {
 # 0.5-2)
 TARGET_EXTRAS = {"shadow_floor": Tolerance("ratio", 0.67, 1.5), "offset_track": Tolerance("diff", 0.0, 1.5)}
 # and on every chip: the share of chips with a target found (a preset whose targets mostly vanish into the floor
-# keeps the target medians of the few left; on floor chips, ripple crests and rocks read as targets), and the swath's
-# gain swinging from ping to ping, which bands target and floor chips alike
-EVERY_CHIP_EXTRAS = {"targets_found": Tolerance("diff", 0.0, 0.15), "bands": Tolerance("ratio", 0.67, 1.5)}
+# keeps the target medians of the few left; on floor chips, ripple crests and rocks read as targets), the swath's
+# gain swinging from ping to ping, which bands target and floor chips alike, and the speckle's contrast wandering
+# from patch to patch, which a classifier tells at once where it is missing (the shared MILCO train and validation
+# targets' medians differ by 7 %, so 1.25x)
+EVERY_CHIP_EXTRAS = {"targets_found": Tolerance("diff", 0.0, 0.15), "bands": Tolerance("ratio", 0.67, 1.5),
+                     "wander": Tolerance("ratio", 0.8, 1.25)}
 
 
 def check(reference: dict, other: dict) -> dict[str, bool]:
@@ -167,8 +170,9 @@ def plot(results: list[dict], path: str | os.PathLike) -> None:
 
     names = column_names(results)
     keys = list(STATISTICS)
-    fig = Figure(figsize=(16, 13))
-    axes = fig.subplots(4, 4).ravel()
+    rows = math.ceil((len(keys) + 1) / 4)  # a histogram per statistic, and the bars
+    fig = Figure(figsize=(16, 3.25 * rows))
+    axes = fig.subplots(rows, 4).ravel()
     for ax, key in zip(axes, keys):
         values = [r["per_chip"][key][np.isfinite(r["per_chip"][key])] for r in results]
         pooled = np.concatenate(values) if any(v.size for v in values) else np.zeros(1)

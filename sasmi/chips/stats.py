@@ -44,6 +44,8 @@ STATISTICS = {
     # a floor chip blurred into a seabed keeps only its own strip's swing
     "bands": ("gain swing along track (log)", ""),
     "periodicity": ("floor periodicity (spectral peak / median)", ""),
+    # a real floor's speckle is grainier in some patches than others; a speckle of one number of looks is not
+    "wander": ("speckle contrast wander (floor blocks, log)", ""),
     "shadow_floor": ("shadow level / floor level", ""),
     # real target chips are cut centred on the contact: renders spread along track land off them in φ
     # even when every other row matches (docs/matching.md)
@@ -51,6 +53,7 @@ STATISTICS = {
 }
 SWING_LAG = 3        # rows: past the speckle's correlation along track (real chips' 1-px acf about 0.2-0.35)
 SWING_TREND = 32.0   # rows: slower swings are the seabed's, not the gain's
+MIN_BLOCKS = 8      # floor blocks needed for a contrast's wander
 MASK_STATISTICS = ("shadow_length", "shadow_width", "highlight_length", "highlight_width")
 
 
@@ -182,6 +185,35 @@ def speckle_looks(image01: np.ndarray, floor: np.ndarray, block: int) -> float:
     return float(np.median(mean[usable] ** 2 / var[usable])) if usable.any() else float("nan")
 
 
+def unexplained_spread(level: np.ndarray, contrast: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """(N,): per row of (N, B) blocks, the spread of their log contrast that a least-squares line in their log
+    level does not explain, over the `usable` ones (N, B) bool; NaN where under MIN_BLOCKS are. A flat row's
+    slope is 0."""
+    w = usable.astype(np.float64)
+    n = w.sum(axis=1, keepdims=True)
+    mean = lambda x: (w * x).sum(axis=1, keepdims=True) / np.maximum(n, 1)
+    dl, dc = level - mean(level), contrast - mean(contrast)
+    var = mean(dl * dl)
+    slope = np.where(var > 1e-12, mean(dl * dc) / np.maximum(var, 1e-12), 0.0)
+    spread = np.sqrt(mean((dc - slope * dl) ** 2))[:, 0]
+    return np.where(n[:, 0] >= MIN_BLOCKS, spread, np.nan)
+
+
+def contrast_wander(image01: np.ndarray, floor: np.ndarray, block: int) -> float:
+    """How far the floor's speckle contrast wanders from block to block beyond what its level explains:
+    `unexplained_spread` of log(std / mean) against log(mean) over whole floor blocks of `block` px above 4
+    gray levels. Real target chips' floors about 0.2; a speckle of one number of looks, chance alone (0.1)."""
+    rows, cols = image01.shape[0] // block, image01.shape[1] // block
+    def blocks(x):
+        return x[:rows * block, :cols * block].reshape(rows, block, cols, block).swapaxes(1, 2).reshape(-1, block**2)
+
+    b = blocks(image01.astype(np.float64))
+    mean, std = b.mean(axis=1), b.std(axis=1)
+    usable = blocks(floor).all(axis=1) & (mean > 4.0 / 255.0) & (std > 0)
+    level, contrast = np.log(np.maximum(mean, 1e-9)), np.log(np.maximum(std, 1e-12) / np.maximum(mean, 1e-9))
+    return float(unexplained_spread(level[None], contrast[None], usable[None])[0])
+
+
 def _highpassed_floor(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """(image / local mean - 1 on the usable floor, 0 elsewhere; where it is usable)."""
     local = filters.gaussian(image01, sigma=sigma, preserve_range=True)
@@ -247,6 +279,7 @@ def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[
     out["acf_range"], out["acf_track"] = floor_autocorrelation(image01, floor, est.highpass_sigma * s)
     out["periodicity"] = floor_periodicity(image01, floor, est.highpass_sigma * s, s)
     out["bands"] = gain_swing(image01, floor)
+    out["wander"] = contrast_wander(image01, floor, max(4, round(est.block * s)))
     third = w // 3
     near, far = image01[:, :third][floor[:, :third]], image01[:, -third:][floor[:, -third:]]
     if near.size and far.size and np.median(near) > 0:

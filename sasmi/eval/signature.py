@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from sasmi.chips.stats import unexplained_spread
 from sasmi.eval.metrics import cores
 
 FOLDS = 5
@@ -42,11 +43,7 @@ def _contrast_wander(x: np.ndarray) -> np.ndarray:
     blocks = x[:, :s // b * b, :s // b * b].reshape(n, s // b, b, s // b, b)
     mean, std = blocks.mean(axis=(2, 4)).reshape(n, -1), blocks.std(axis=(2, 4)).reshape(n, -1)
     level, contrast = np.log(mean + 1e-3), np.log(std / (mean + 1e-3) + 1e-3)
-    # each chip's least-squares line of contrast against level, all chips at once; a flat chip's slope is 0
-    dl, dc = level - level.mean(axis=1, keepdims=True), contrast - contrast.mean(axis=1, keepdims=True)
-    var = (dl * dl).mean(axis=1, keepdims=True)
-    slope = np.where(var > 1e-12, (dl * dc).mean(axis=1, keepdims=True) / np.maximum(var, 1e-12), 0.0)
-    return (dc - slope * dl).std(axis=1)
+    return unexplained_spread(level, contrast, np.ones(level.shape, bool))
 
 
 def chip_statistics(images: np.ndarray, block: int = 128) -> dict[str, np.ndarray]:

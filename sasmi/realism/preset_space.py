@@ -45,6 +45,7 @@ KNOBS: dict[str, Knob] = {
     "post.speckle_cell_track": Knob(0.0, 0.5, False),
     "post.noise_std": Knob(0.0, 0.1, False),
     "post.gain_swing": Knob(0.0, 0.3, False),  # sd of the log gain from ping to ping
+    "post.speckle_wander": Knob(0.0, 0.5, False),  # sd of the log of the speckle's contrast from patch to patch
     "targets.size": Knob(0.25, 4.0, True),  # a factor on every size of every [[targets]] kind
     "targets.burial": Knob(0.0, 1.0, False),  # a factor on every kind's burial: no deeper than the start's,
                                               # which keeps every draw's target above the floor

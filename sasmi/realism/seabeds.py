@@ -33,6 +33,7 @@ from scipy import ndimage
 from sasmi.errors import SasmiError
 from sasmi.images import list_images
 from sasmi.realism.display import bent
+from sasmi.render.post import wander_field, wandered
 
 COARSE = 32      # px: a seabed (blurred over SEABED px at 128) keeps nothing finer than this grid shows
 SEABED = 4.0     # px at 128: a floor chip blurred by this is its seabed (bands, patches); what is left, its speckle
@@ -177,19 +178,6 @@ def contrast_wander(speckle: np.ndarray, seabed: np.ndarray, keep: np.ndarray, s
     return float(brentq(excess, 0.0, WANDER_LIMIT, xtol=1e-3))
 
 
-def wander_field(shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
-    """(H, W): a field of unit spread, smooth over WANDER_LENGTH px (at 128 px)."""
-    field = ndimage.gaussian_filter(rng.standard_normal(shape), WANDER_LENGTH, mode="wrap")
-    return field / max(field.std(), 1e-12)
-
-
-def wandered(speckle: np.ndarray, wander: float, field: np.ndarray) -> np.ndarray:
-    """(H, W) >= 0: a speckle whose deviations from its mean are scaled by exp(wander × field − wander²): its
-    contrast wanders from patch to patch as the field does, its mean square kept."""
-    mean = speckle.mean()
-    return np.maximum(mean + (speckle - mean) * np.exp(wander * field - wander ** 2), 0.0)
-
-
 def _level_factor(seabed: np.ndarray, slope: float, where: np.ndarray | None = None) -> np.ndarray:
     """(H, W): how much a speckle's deviations from its mean grow over `seabed` with `slope` (1 at its median)."""
     median = np.median(seabed if where is None else seabed[where])
@@ -208,7 +196,8 @@ def _speckle_tables(chips: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarr
         slopes.append(slope)
         rng = np.random.default_rng(i)  # a stream per chip: the file's bytes fixed
         stationary = _iaaft(powers[-1], levels[-1], rng)
-        wanders.append(contrast_wander(speckle, seabed, keep, stationary, wander_field(stationary.shape, rng)))
+        field = wander_field(stationary.shape, rng, WANDER_LENGTH)
+        wanders.append(contrast_wander(speckle, seabed, keep, stationary, field))
     brightest = np.array([chip.max() for chip in chips])
     return np.stack(powers), np.stack(levels), np.array(slopes), np.array(wanders), brightest
 
@@ -296,7 +285,7 @@ def draw_floor(seabeds: Seabeds, shape: tuple[int, int], rng: np.random.Generato
     seabed = draw_seabed(seabeds, shape, rng)
     chip = int(rng.integers(len(seabeds.speckle_levels)))
     speckle = draw_speckle(seabeds, chip, rng)
-    speckle = wandered(speckle, seabeds.speckle_wander[chip], wander_field(speckle.shape, rng))
+    speckle = wandered(speckle, seabeds.speckle_wander[chip], wander_field(speckle.shape, rng, WANDER_LENGTH))
     if speckle.shape != tuple(shape):
         speckle = _resized(speckle, shape, "area" if shape[0] < SPECKLE else "bilinear")
     mean = speckle.mean()

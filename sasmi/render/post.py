@@ -77,6 +77,19 @@ def swing_noise(rng: np.random.Generator, rows: int, length: float) -> np.ndarra
     return noise / max(noise.std(), 1e-9)
 
 
+def wander_field(shape: tuple[int, int], rng: np.random.Generator, length: float) -> np.ndarray:
+    """(H, W): a field of unit spread, smooth over `length` px (a Gaussian's sigma)."""
+    field = ndimage.gaussian_filter(rng.standard_normal(shape), length, mode="wrap")
+    return field / max(field.std(), 1e-12)
+
+
+def wandered(speckle: np.ndarray, wander: float, field: np.ndarray) -> np.ndarray:
+    """(H, W) >= 0: a speckle whose deviations from its mean are scaled by exp(wander x field - wander²): its
+    contrast wanders from patch to patch as the field does, its mean square kept."""
+    mean = speckle.mean()
+    return np.maximum(mean + (speckle - mean) * np.exp(wander * field - wander ** 2), 0.0)
+
+
 def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) speckle (mean 1; all 1 when off) and offset (noise floor x speckle + noise; gray levels).
 
@@ -84,6 +97,9 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     std / mean = patchiness, patches of `patch_size`): the compound (K-distribution) model of
     seafloor clutter, where the sediment's backscatter strength varies in patches under the
     speckle. It multiplies every echo, as the speckle does; the noise floor stays untextured.
+    With `post.speckle_wander` the speckle's deviations from its mean are scaled by exp(w x field - w²), a
+    field of unit sd smooth over `speckle_wander_length`: its contrast wanders from patch to patch, as real
+    chips' does, where a speckle of one number of looks is equally grainy everywhere.
     With `post.gain_swing` each row along track (a ping) is multiplied by exp(gain_swing x n), n
     of unit sd correlated over `gain_swing_length`: the swath's gain swinging from ping to ping,
     which real chips show as rows brighter or darker as a whole. It too spares the noise floor.
@@ -99,6 +115,10 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
                                        post.speckle_cell_range / pixel / FWHM_PER_SIGMA)
         else:
             speckle = rng.gamma(post.speckle_looks, 1.0 / post.speckle_looks, size=(size, size))
+        if post.speckle_wander > 0:  # its own stream: the wander changes none of the chip's other draws
+            field = wander_field((size, size), np.random.default_rng([scene.seed, 14]),
+                                 post.speckle_wander_length / pixel)
+            speckle = wandered(speckle, post.speckle_wander, field)
     if post.noise_std > 0:
         noise = rng.normal(0.0, post.noise_std, size=(size, size))
     offset = noise + post.noise_floor * speckle  # the background has no sediment texture

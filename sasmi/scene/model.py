@@ -136,6 +136,10 @@ class Post:
     speckle_cell_range: float = spec(0.0, nonneg, ">= 0", "m; resolution cell along range; speckle is correlated "
                                      "over it (0 = independent per pixel)")
     speckle_cell_track: float = spec(0.0, nonneg, ">= 0", "m; resolution cell along track (0 = independent per pixel)")
+    speckle_wander: float = spec(0.0, nonneg, ">= 0", "sd of the log of the speckle's contrast from patch to patch "
+                                 "(0 = equally grainy everywhere)")
+    speckle_wander_length: float = spec(1.0, positive, "> 0",
+                                        "m over which the speckle's contrast wanders (a Gaussian's sigma)")
     gain_swing: float = spec(0.0, nonneg, ">= 0", "sd of the log gain from ping to ping: rows along track brighter "
                              "or darker as a whole (0 = off)")
     gain_swing_length: float = spec(1.5, positive, "> 0",

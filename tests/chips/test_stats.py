@@ -121,6 +121,29 @@ def test_gain_swings_along_track_read_as_bands_and_a_target_or_range_fall_off_do
     assert image_statistics(FLOOR * np.linspace(1.0, 0.6, SIZE)[None, :] * speckle(rng))["bands"] < 0.02
 
 
+def test_speckle_grainier_in_patches_reads_as_contrast_wander_and_a_level_change_or_a_target_does_not():
+    """A speckle whose deviations swing by exp(0.3 x a field smooth over 8 px) wanders well beyond a plain one's
+    chance spread; a seabed brighter and darker in patches over a sonar's noise (its dark patches grainier, as their
+    level explains) or a target's blocks do not."""
+    rng = np.random.default_rng(6)
+
+    def smooth_field() -> np.ndarray:
+        field = ndimage.gaussian_filter(rng.standard_normal((SIZE, SIZE)), 8.0, mode="wrap")
+        return field / field.std()
+
+    plain = [image_statistics(FLOOR * speckle(rng))["wander"] for _ in range(6)]
+    grainy = []
+    for _ in range(6):
+        s = speckle(rng)
+        grainy.append(image_statistics(FLOOR * (1 + (s - 1) * np.exp(0.3 * smooth_field())).clip(0))["wander"])
+    patchy = [image_statistics(np.clip(FLOOR * np.exp(0.6 * smooth_field()) * speckle(rng)
+                                       + rng.normal(0.0, 0.04, (SIZE, SIZE)), 0, 1))["wander"] for _ in range(6)]
+    targets = [image_statistics(target_chip(rng))["wander"] for _ in range(6)]
+    assert np.median(plain) < 0.12 and np.median(grainy) > np.median(plain) + 0.12, (plain, grainy)
+    assert abs(np.median(patchy) - np.median(plain)) < 0.05, (plain, patchy)
+    assert abs(np.median(targets) - np.median(plain)) < 0.02, (plain, targets)
+
+
 def test_ripples_raise_the_floor_periodicity_and_banding_does_not():
     rng = np.random.default_rng(4)
     rows, cols = np.mgrid[:SIZE, :SIZE]

@@ -220,18 +220,23 @@ def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path):
                               1.0)["distances"] for name, text in variants.items()}
 
 
-def test_the_objective_charges_targets_off_the_centre_row_and_a_missing_gain_swing(tmp_path):
-    """Real chips with centred targets and a gain swing: new draws of their preset match both; the same preset with
-    its targets spread ±2 m along track misses the offset alone, and without the swing misses the swing alone."""
-    swung = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\n"
-    variants = {"truth": swung, "off_centre": swung.replace('shape = "cylinder"', 'shape = "cylinder"\ny = {uniform = '
+def test_the_objective_charges_targets_off_the_centre_row_a_missing_gain_swing_and_a_speckle_that_never_wanders(
+        tmp_path):
+    """Real chips with centred targets, a gain swing and a speckle grainier in some patches: new draws of their preset
+    match all three; the same preset with its targets spread ±2 m along track misses the offset alone, without the
+    swing the swing alone, and without the wander the wander alone."""
+    truth = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\nspeckle_wander = 0.3\n"
+    variants = {"truth": truth, "off_centre": truth.replace('shape = "cylinder"', 'shape = "cylinder"\ny = {uniform = '
                                                                                   '[-2.0, 2.0]}'),
-                "no_swing": swung.replace("gain_swing = 0.15", "gain_swing = 0.0")}
-    real, distances = distances_to_renders_of(swung, variants, tmp_path)
-    assert {"offset_track", "bands"} <= set(real.checked)
-    assert distances["truth"]["offset_track"] <= 1 and distances["truth"]["bands"] <= 1, distances["truth"]
-    assert distances["off_centre"]["offset_track"] > 1.5 and distances["off_centre"]["bands"] <= 1, distances
-    assert distances["no_swing"]["bands"] > 1.5 and distances["no_swing"]["offset_track"] <= 1, distances
+                "no_swing": truth.replace("gain_swing = 0.15", "gain_swing = 0.0"),
+                "no_wander": truth.replace("speckle_wander = 0.3", "speckle_wander = 0.0")}
+    real, distances = distances_to_renders_of(truth, variants, tmp_path)
+    parts = ("offset_track", "bands", "wander")
+    assert set(parts) <= set(real.checked)
+    for name, missed in (("truth", None), ("off_centre", "offset_track"), ("no_swing", "bands"),
+                         ("no_wander", "wander")):
+        for part in parts:
+            assert (distances[name][part] > 1.5) if part == missed else (distances[name][part] <= 1), (name, distances)
 
 
 def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_sizes(tmp_path):

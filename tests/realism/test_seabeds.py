@@ -15,7 +15,8 @@ from sasmi.images import write_gray
 from sasmi.realism.floors import on_floor, onto_seabed_floors, seabed_floor
 from sasmi.realism.seabeds import (SEABED, _block_contrast, _unexplained, contrast_slope, draw_floor, draw_seabed,
                                    draw_speckle, fit_seabeds, load_seabeds, log_seabed, save_seabeds, seabed_of,
-                                   speckle_of, wander_field, wandered)
+                                   speckle_of, WANDER_LENGTH)
+from sasmi.render.post import wander_field, wandered
 
 SIZE = 128
 
@@ -222,7 +223,7 @@ def _wandering_floors(folder, wander, n=6, seed=3):
     """Flat floor chips whose grainy speckle's contrast wanders over patches by `wander` (0: the same everywhere)."""
     rng = np.random.default_rng(seed)
     for i in range(n):
-        speckle = wandered(_grainy_speckle(rng), wander, wander_field((SIZE, SIZE), rng))
+        speckle = wandered(_grainy_speckle(rng), wander, wander_field((SIZE, SIZE), rng, WANDER_LENGTH))
         write_gray(folder / f"floor_{i}.png", np.clip(0.3 * speckle, 0, 1))
     return folder
 

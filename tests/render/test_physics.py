@@ -148,6 +148,11 @@ def test_patchiness_textures_the_floor_in_patches_of_patch_size():
     assert post_fields(textured, size)[0].var() > 1.2 * post_fields(speckled, size)[0].var()
 
 
+def speckled_floor(**post) -> Scene:
+    """A flat floor with no target under 4-look speckle and a noise floor of 0.02, the `post` fields set beside."""
+    return dataclasses.replace(flat_chip(post=Post(speckle_looks=4.0, noise_floor=0.02, **post), targets=()), seed=3)
+
+
 def test_gain_swing_brightens_and_darkens_whole_rows_along_track():
     """post.gain_swing / gain_swing_length: each row along track times exp(gain_swing x n), n of unit sd
     correlated over gain_swing_length, from its own stream (the speckle under it is the same); the noise floor
@@ -157,14 +162,8 @@ def test_gain_swing_brightens_and_darkens_whole_rows_along_track():
 
     size = 128
     pixel = 6.0 / size
-    speckled = dataclasses.replace(flat_chip(post=Post(speckle_looks=4.0, noise_floor=0.02), targets=()), seed=3)
-
-    def swung(sd: float, length: float) -> Scene:
-        return dataclasses.replace(speckled, post=dataclasses.replace(speckled.post, gain_swing=sd,
-                                                                      gain_swing_length=length))
-
-    plain, plain_offset = post_fields(speckled, size)
-    banded, offset = post_fields(swung(0.1, 3 * pixel), size)
+    plain, plain_offset = post_fields(speckled_floor(), size)
+    banded, offset = post_fields(speckled_floor(gain_swing=0.1, gain_swing_length=3 * pixel), size)
     np.testing.assert_array_equal(offset, plain_offset)
     log_rows = np.log(banded / plain)
     np.testing.assert_allclose(log_rows, log_rows[:, :1] * np.ones((1, size)), atol=1e-12)  # whole rows
@@ -172,10 +171,36 @@ def test_gain_swing_brightens_and_darkens_whole_rows_along_track():
     assert rows.std() == pytest.approx(0.1, rel=1e-6)
     lag = np.corrcoef(rows[:-3], rows[3:])[0, 1]  # exp(-3² / (4 · 3²)) = 0.78 for a Gaussian of sigma 3 px
     assert 0.6 < lag < 0.9, lag
-    short = np.log(post_fields(swung(0.1, 0.5 * pixel), size)[0] / plain)[:, 0]
+    short = np.log(post_fields(speckled_floor(gain_swing=0.1, gain_swing_length=0.5 * pixel), size)[0] / plain)[:, 0]
     assert np.corrcoef(short[:-3], short[3:])[0, 1] < 0.2
     floor = np.ones((size, size), bool)
     assert gain_swing(0.3 * banded.clip(0, 3) / 3, floor) > gain_swing(0.3 * plain.clip(0, 3) / 3, floor) + 0.05
+
+
+def test_speckle_wander_makes_the_speckle_grainier_in_some_patches_than_others():
+    """post.speckle_wander / speckle_wander_length: the speckle's deviations from its mean times exp(w x field - w²),
+    a field of unit sd smooth over speckle_wander_length, from its own stream (0: the speckle as it was); the noise
+    floor's speckle wanders with it; `sasmi stats` reads it as the contrast's wander."""
+    from sasmi.chips.stats import contrast_wander
+    from sasmi.render.post import post_fields
+
+    size = 128
+    pixel = 6.0 / size
+    plain = post_fields(speckled_floor(), size)[0]
+    np.testing.assert_array_equal(post_fields(speckled_floor(speckle_wander_length=8 * pixel), size)[0], plain)
+    grainy, offset = post_fields(speckled_floor(speckle_wander=0.3, speckle_wander_length=8 * pixel), size)
+    np.testing.assert_allclose(offset, 0.02 * grainy)
+    assert grainy.mean() == pytest.approx(plain.mean(), rel=0.03)
+    kept = (grainy > 0) & (np.abs(plain - plain.mean()) > 0.2)  # no clipping at 0, deviations far from 0
+    log_scale = np.log((grainy - plain.mean())[kept] / (plain - plain.mean())[kept])
+    assert log_scale.std() == pytest.approx(0.3, rel=0.1)
+    scale = np.full((size, size), np.nan)
+    scale[kept] = log_scale
+    near = np.isfinite(scale[:, :-4]) & np.isfinite(scale[:, 4:])
+    assert np.corrcoef(scale[:, :-4][near], scale[:, 4:][near])[0, 1] > 0.8  # smooth over 8 px
+    floor = np.ones((size, size), bool)
+    assert (contrast_wander(0.3 * grainy.clip(0, 3) / 3, floor, 8)
+            > contrast_wander(0.3 * plain.clip(0, 3) / 3, floor, 8) + 0.1)
 
 
 def test_lambert_squared_backscatter_sharpens_the_relief(renderer64):
