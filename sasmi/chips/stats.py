@@ -173,15 +173,17 @@ def gain_swing(image01: np.ndarray, floor: np.ndarray) -> float:
     return profile_swing(profile, valid, w / 128.0)
 
 
+def _blocks(x: np.ndarray, block: int) -> np.ndarray:
+    """(blocks, block²): every whole `block`-px block of an (H, W) array at once, row by row."""
+    rows, cols = x.shape[0] // block, x.shape[1] // block
+    return x[:rows * block, :cols * block].reshape(rows, block, cols, block).swapaxes(1, 2).reshape(rows * cols, -1)
+
+
 def speckle_looks(image01: np.ndarray, floor: np.ndarray, block: int) -> float:
     """Median over floor blocks of mean² / variance (the equivalent number of looks)."""
-    rows, cols = image01.shape[0] // block, image01.shape[1] // block
-    def blocks(x):  # (rows, cols, block²): every whole block at once
-        return x[:rows * block, :cols * block].reshape(rows, block, cols, block).swapaxes(1, 2).reshape(rows, cols, -1)
-
-    b = blocks(image01.astype(np.float64))
-    mean, var = b.mean(axis=2), b.var(axis=2, ddof=1)
-    usable = blocks(floor).all(axis=2) & (mean > 4.0 / 255.0) & (var > 0)
+    b = _blocks(image01.astype(np.float64), block)
+    mean, var = b.mean(axis=1), b.var(axis=1, ddof=1)
+    usable = _blocks(floor, block).all(axis=1) & (mean > 4.0 / 255.0) & (var > 0)
     return float(np.median(mean[usable] ** 2 / var[usable])) if usable.any() else float("nan")
 
 
@@ -203,13 +205,9 @@ def contrast_wander(image01: np.ndarray, floor: np.ndarray, block: int) -> float
     """How far the floor's speckle contrast wanders from block to block beyond what its level explains:
     `unexplained_spread` of log(std / mean) against log(mean) over whole floor blocks of `block` px above 4
     gray levels. Real target chips' floors about 0.2; a speckle of one number of looks, chance alone (0.1)."""
-    rows, cols = image01.shape[0] // block, image01.shape[1] // block
-    def blocks(x):
-        return x[:rows * block, :cols * block].reshape(rows, block, cols, block).swapaxes(1, 2).reshape(-1, block**2)
-
-    b = blocks(image01.astype(np.float64))
+    b = _blocks(image01.astype(np.float64), block)
     mean, std = b.mean(axis=1), b.std(axis=1)
-    usable = blocks(floor).all(axis=1) & (mean > 4.0 / 255.0) & (std > 0)
+    usable = _blocks(floor, block).all(axis=1) & (mean > 4.0 / 255.0) & (std > 0)
     level, contrast = np.log(np.maximum(mean, 1e-9)), np.log(np.maximum(std, 1e-12) / np.maximum(mean, 1e-9))
     return float(unexplained_spread(level[None], contrast[None], usable[None])[0])
 
