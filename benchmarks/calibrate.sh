@@ -2,8 +2,9 @@
 # The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
 # never saw.
 # The calibration of part 2 and the first of part 3 are measured as the script stands; the first of part 1 at
-# commit 26931f0, whose default knobs held seafloor.ripple_amplitude; the others at commit 80abb38, whose objective
-# did not match the target's offset along track and the gain's swing, whose default knobs lacked
+# commit 26931f0, whose default knobs held seafloor.ripple_amplitude and whose objective did not match the speckle's
+# contrast wander; the others at commit 80abb38, whose objective did not match the wander, the target's offset along
+# track and the gain's swing, whose default knobs lacked
 # targets.track_offset and whose FLOOR_KNOBS lacked post.gain_swing: the script there gives their figures.
 #   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split: as the
 #      command stands; over the default knobs but the gain's swing (NO_SWING) as it stands, with the plain φ-FID
