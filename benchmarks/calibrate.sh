@@ -1,18 +1,17 @@
 #!/bin/sh
 # The figures of docs/results.md, *Calibration*: `sasmi calibrate` from a far start preset, judged on chips it
 # never saw.
-# The calibration of part 2 and the first of part 3 are measured as the script stands; the first of part 1 at
-# commit 26931f0, whose default knobs held seafloor.ripple_amplitude and whose objective did not match the speckle's
-# contrast wander; the others at commit 80abb38, whose objective did not match the wander, the target's offset along
-# track and the gain's swing, whose default knobs lacked
-# targets.track_offset and whose FLOOR_KNOBS lacked post.gain_swing: the script there gives their figures.
+# Part 2 and the first calibrations of parts 1 and 3 are measured as the script stands; the others at commit 80abb38,
+# whose objective did not match the wander, the target's offset along track and the gain's swing, whose default knobs
+# lacked targets.track_offset and whose FLOOR_KNOBS lacked post.gain_swing: the script there gives their figures.
 #   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split: as the
 #      command stands; over the default knobs but the gain's swing (NO_SWING) as it stands, with the plain φ-FID
 #      ratio (--plain-fid), and with it and --variety-weight 1 (the last, as 2 and 3, calibrating the search's best:
 #      --contenders 1); 400 renders of each result against the validation targets: `sasmi stats --check`, the
 #      φ-FID ratio and the two-sample test beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
-#      scene group among themselves; 400 renders against the held-back floors of that sonar.
+#      scene group among themselves; 400 renders against the held-back floors of that sonar, the φ-FID ratio and the
+#      two-sample test beside the start's.
 #   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1: the command as a user first runs
 #      it (the default start and knobs), then over NO_SWING as in 1; 400 renders of each against the validation
 #      targets beside cylinder_chip's own, the first with the two-sample test.
@@ -83,6 +82,8 @@ $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out 
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
 $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \
     --check || true
+$SASMI evaluate --real "$RUNS/$SONAR-split/validation/seafloor" --out "$RUNS/calibrate-$SONAR/two-sample" \
+    --set calibrated="$RUNS/calibrate-$SONAR/renders" --set seafloor_only="$RUNS/seafloor-renders"
 
 $SASMI calibrate --real "$RUNS/split/train/targets" --minutes "$MINUTES" --out "$RUNS/calibrate-default"
 $SASMI render "$RUNS/calibrate-default/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-default/renders"

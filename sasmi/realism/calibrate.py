@@ -200,7 +200,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                   "phi": describe_phi(encoder), "identity": {**cfg.identity(), "params": list(cfg.params),
                                                              "real": str(Path(real_folder).resolve()),
                                                              "start": str(preset.path.resolve()),
-                                                             "statistics": list(real.checked)}}
+                                                             "statistics": list(real.checked),
+                                                             "found_tolerance": real.tolerances["targets_found"].high}}
         _check_record(out, record)
         x0 = start_values(preset.raw, cfg.params)
         study = open_study(out, cfg, x0)

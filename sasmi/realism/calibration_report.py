@@ -15,7 +15,6 @@ import numpy as np
 from sasmi.chips.compare import TOLERANCES
 from sasmi.chips.stats import STATISTICS
 from sasmi.images import write_text
-from sasmi.realism.calibration_objective import OBJECTIVE
 from sasmi.realism.calibration_pins import PARTNER, RISE, SPAN, STEP, best_tenth, pairs
 from sasmi.realism.preset_space import knob, start_values
 
@@ -132,7 +131,7 @@ def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str,
 def statistics_table(real, shown: dict) -> list[str]:
     lines = ["| statistic | real | start | calibrated | tolerance |", "|---|---|---|---|---|"]
     for key in real.checked:
-        tol = OBJECTIVE[key]
+        tol = real.tolerances[key]
         label = STATISTICS[key][0] if key in STATISTICS else "targets found (share of chips)"
         cells = [label + ("" if key in TOLERANCES else " (calibrate only)"), _number(real.medians[key])]
         for name in ("start", "calibrated"):

@@ -16,7 +16,8 @@ from PIL import Image
 from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
-from sasmi.realism.calibration_objective import phi_references, real_chips, score, spread_corrected_fid
+from sasmi.realism.calibration_objective import (found_tolerance, phi_references, real_chips, score,
+                                                 spread_corrected_fid)
 from sasmi.realism.preset_space import (DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, named_knobs, spread,
                                        start_values)
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
@@ -250,6 +251,22 @@ def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_si
     assert distances["target"]["targets_found"] > 2, distances["target"]
 
 
+@pytest.mark.parametrize("share, real, renders", [(0.83, 115, 32), (0.5, 40, 16), (0.1, 60, 32)])
+def test_the_share_of_chips_with_a_target_is_held_to_two_standard_errors_of_its_draws(share, real, renders):
+    """Real chips and a trial's renders drawn alike: their shares of chips with a target found fall within the tolerance
+    about 95 % of the time, as two standard errors should, at the MILCO targets' share and elsewhere."""
+    rng = np.random.default_rng(0)
+    tol = found_tolerance(share, real, renders)
+    real_shares, trial_shares = rng.binomial(real, share, 20000) / real, rng.binomial(renders, share, 20000) / renders
+    inside = np.mean([tol.distance(r, t) <= 1 for r, t in zip(real_shares, trial_shares)])
+    assert 0.92 <= inside <= 0.985, (tol.high, inside)
+
+
+def test_on_floors_where_no_target_is_found_one_render_with_one_passes_by_chance_and_three_do_not():
+    tol = found_tolerance(0.0, 42, 16)
+    assert tol.distance(0.0, 1 / 16) <= 1 < tol.distance(0.0, 2 / 16) and tol.distance(0.0, 3 / 16) > 2
+
+
 def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_path):
     real, start = known
     cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16)
@@ -276,7 +293,8 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     study = optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}")
     assert len(study.trials) == 30 and [t.params for t in study.trials[:25]] == first
 
-    with pytest.raises(SasmiError, match="other settings \\(chips\\)"):
+    # 20 renders a trial: more noise in their share of chips with a target, so a wider tolerance on it
+    with pytest.raises(SasmiError, match="other settings \\(chips, found_tolerance\\)"):
         calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "chips": 20}), out, progress=False)
     # a study whose objective matched other statistics (another sasmi's) is not continued under this one's
     kept = (out / "calibrate.json").read_text()
