@@ -33,7 +33,7 @@ class RealChips:
     folder: Path
     medians: dict[str, float]
     checked: tuple[str, ...]  # the statistics matched: the target ones only where most chips show a target
-    tolerances: dict[str, Tolerance]  # statistic -> its tolerance, the share of chips with a target's set by these chips
+    tolerances: dict[str, Tolerance]  # statistic -> tolerance; targets_found's from `found_tolerance`
     phi: np.ndarray  # (N, D) float64
     phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
     phi_halves: float  # half-split FID of those `chips` real chips (`half_split_fid`), averaged over the same draws
