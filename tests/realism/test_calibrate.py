@@ -262,7 +262,7 @@ def test_the_share_of_chips_with_a_target_is_held_to_two_standard_errors_of_its_
     assert 0.92 <= inside <= 0.985, (tol.high, inside)
 
 
-def test_on_floors_where_no_target_is_found_one_render_with_one_passes_by_chance_and_three_do_not():
+def test_on_floors_where_no_target_is_found_one_render_in_16_with_one_passes_by_chance_and_two_do_not():
     tol = found_tolerance(0.0, 42, 16)
     assert tol.distance(0.0, 1 / 16) <= 1 < tol.distance(0.0, 2 / 16) and tol.distance(0.0, 3 / 16) > 2
 
