@@ -10,7 +10,8 @@
 #      --contenders 1); 400 renders of each result against the validation targets: `sasmi stats --check`, the
 #      φ-FID ratio and the two-sample test beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
-#      scene group among themselves; 400 renders against the held-back floors of that sonar, the φ-FID ratio and the
+#      scene group among themselves, over FLOOR_KNOBS (the sand waves' size, direction and bends and a second
+#      sediment among them); 400 renders against the held-back floors of that sonar, the φ-FID ratio and the
 #      two-sample test beside the start's.
 #   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1: the command as a user first runs
 #      it (the default start and knobs), then over NO_SWING as in 1; 400 renders of each against the validation
@@ -24,8 +25,9 @@ SONAR=${3:-sassed}
 SASMI=.venv/bin/sasmi
 DATA=../shared/data/sonar-chips
 FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,\
-seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,\
-seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
+seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.ripple_wavelength,\
+seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.mosaic_contrast,seafloor.mosaic_share,seafloor.mosaic_size,\
+seafloor.rocks,seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
 post.speckle_cell_track,post.noise_std,post.gain_swing,post.speckle_wander,post.gain.spread,seafloor.albedo.spread,\
 sonar.altitude.spread
 # the default knobs of commit 80abb38 (ripples among them, no track offset) but post.gain_swing, in their order

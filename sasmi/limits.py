@@ -183,6 +183,9 @@ FIELDS: dict[str, Range] = {
     "seafloor.ripple_amplitude": Range(None, 10.0, "m; the array flies at max_range / 10"),
     "seafloor.ripple_wavelength": Range(1e-3, METRES, "m; as correlation_length"),
     "seafloor.ripple_direction": ANGLE,
+    "seafloor.ripple_sinuosity": Range(None, 10.0, "wavelengths; crests that wander further are noise"),
+    "seafloor.mosaic_contrast": Range(1e-3, 1e3, "a sediment 1000 times weaker than the other renders black"),
+    "seafloor.mosaic_size": Range(None, METRES, "m; as correlation_length"),
     "seafloor.rocks": Range(None, 1000, "each rock is one pass over the (size+1)² heightfield "
                                         "(~0.4 ms at 256 px)", int),
     "seafloor.rock_radius": Range(None, 100.0, "m; a larger bump is the seafloor, not clutter"),

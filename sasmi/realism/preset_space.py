@@ -54,10 +54,20 @@ KNOBS: dict[str, Knob] = {
     "targets.track_offset": Knob(0.02, 4.0, True),
 }
 # searched only when named: what some seabeds show and others not at all. Sand ripples: stripes a few px apart that
-# neither φ nor the statistics see but a classifier tells from real MILCO chips at once (docs/calibrate.md); a floor
-# whose backscatter varies in patches (seabed boundaries), which moved renders off the MILCO chips (docs/matching.md)
-NAMED_ONLY = {"seafloor.ripple_amplitude": Knob(0.0, 0.05, False), "seafloor.patchiness": Knob(0.0, 1.5, False, 2.0),
-              "seafloor.patch_size": Knob(0.3, 20.0, True)}
+# neither φ nor the statistics see but a classifier tells from real MILCO chips at once (docs/calibrate.md), or sand
+# waves metres apart whose crests bend (SASSED); a floor whose backscatter varies in patches, which moved renders off
+# the MILCO chips (docs/matching.md); two sediments with sharp boundaries between them
+NAMED_ONLY = {
+    "seafloor.ripple_amplitude": Knob(0.0, 0.2, False),  # sand waves cast shadows from about 0.05 m
+    "seafloor.ripple_wavelength": Knob(0.2, 10.0, True),
+    "seafloor.ripple_direction": Knob(0.0, 180.0, False),  # a start's spread of 1 draws over [0, 2 x centre]
+    "seafloor.ripple_sinuosity": Knob(0.0, 0.5, False),
+    "seafloor.patchiness": Knob(0.0, 1.5, False, 2.0),
+    "seafloor.patch_size": Knob(0.3, 20.0, True),
+    "seafloor.mosaic_contrast": Knob(0.1, 10.0, True),  # 1: one sediment; darker or brighter second ones alike
+    "seafloor.mosaic_share": Knob(0.0, 1.0, False, 1.0),
+    "seafloor.mosaic_size": Knob(0.5, 30.0, True),
+}
 KNOBS.update(NAMED_ONLY)
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import ndimage
 
 from sasmi.render.geometry import Geometry, exposure, flat_floor_irradiance
+from sasmi.render.sediments import mosaic
 from sasmi.scene.model import Scene
 
 Maps = tuple[np.ndarray, np.ndarray, np.ndarray]  # (H, W) float64 each: gain, speckle, offset
@@ -127,6 +128,10 @@ def post_fields(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
         sigma = floor.patch_size / pixel / FWHM_PER_SIGMA
         speckle = speckle * correlated_gamma(np.random.default_rng([scene.seed, 12]), floor.patchiness**-2, size,
                                              sigma, sigma)
+    if floor.mosaic_contrast != 1:  # its own stream too
+        sigma = floor.mosaic_size / pixel / FWHM_PER_SIGMA
+        speckle = speckle * mosaic(np.random.default_rng([scene.seed, 15]), size, sigma, floor.mosaic_share,
+                                   floor.mosaic_contrast)
     if post.gain_swing > 0:  # its own stream too
         rows = swing_noise(np.random.default_rng([scene.seed, 13]), size, post.gain_swing_length / pixel)
         speckle = speckle * np.exp(post.gain_swing * rows)[:, None]

@@ -2,10 +2,11 @@
 
 The floor of a scene is one function z(x, y) of position in metres, whatever the image
 size: the rough part is drawn on a fixed grid of FLOOR_SAMPLES x FLOOR_SAMPLES points over
-the chip and interpolated bilinearly; ripples and rocks are closed-form. A render at n
-pixels samples that surface at its (n+1) x (n+1) vertices (exactly on the grid points
-when n divides FLOOR_SAMPLES), so 64, 128 and 256 px renders of one (seed, index) show the
-same seafloor, and the 64 px cross-check checks the floor a 256 px render shows.
+the chip and interpolated bilinearly, as is the sideways wander of sinuous ripples' crests;
+ripples and rocks are closed-form. A render at n pixels samples that surface at its
+(n+1) x (n+1) vertices (exactly on the grid points when n divides FLOOR_SAMPLES), so 64, 128
+and 256 px renders of one (seed, index) show the same seafloor, and the 64 px cross-check
+checks the floor a 256 px render shows.
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ class Surface:
     ripple_direction: float  # deg from +x
     ripple_phase: float
     rocks: tuple[tuple[float, float, float], ...]  # (centre x, centre y, radius), m
+    ripple_wander: np.ndarray | None = None  # as rough: radians added to the ripples' phase (sinuous crests)
 
     def at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Heights (m) at points x, y (any equal shapes, m from the chip centre; clamped to the chip)."""
@@ -65,16 +67,21 @@ class Surface:
         if self.ripple_amplitude <= 0:
             return 0.0
         theta = np.deg2rad(self.ripple_direction)
-        return self.ripple_amplitude * np.sin(
-            2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase)
+        phase = 2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase
+        if self.ripple_wander is not None:
+            phase = phase + self._grid_at(self.ripple_wander, x, y)
+        return self.ripple_amplitude * np.sin(phase)
 
     def _rough_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        n = self.rough.shape[0] - 1
+        return self._grid_at(self.rough, x, y)
+
+    def _grid_at(self, h: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """A periodic grid over the chip (row = y, col = x) interpolated bilinearly at x, y."""
+        n = h.shape[0] - 1
         u = np.clip((x + self.chip_size / 2) / self.chip_size * n, 0, n)
         v = np.clip((y + self.chip_size / 2) / self.chip_size * n, 0, n)
         c0, r0 = np.minimum(u.astype(np.int64), n - 1), np.minimum(v.astype(np.int64), n - 1)
         fu, fv = u - c0, v - r0
-        h = self.rough
         return ((1 - fv) * ((1 - fu) * h[r0, c0] + fu * h[r0, c0 + 1])
                 + fv * ((1 - fu) * h[r0 + 1, c0] + fu * h[r0 + 1, c0 + 1]))
 
@@ -109,9 +116,22 @@ def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
         if std > 0:
             rough = np.pad(field, ((0, 1), (0, 1)), mode="wrap") * (floor.rms_height / std)
     phase = float(rng.uniform(0, 2 * np.pi)) if floor.ripple_amplitude > 0 else 0.0
+    wander = None
+    if floor.ripple_amplitude > 0 and floor.ripple_sinuosity > 0:  # its own stream: straight ripples keep their draws
+        wander = 2 * np.pi * floor.ripple_sinuosity * _wander(np.random.default_rng([seed, 8]), n,
+                                                              floor.ripple_wavelength / (chip_size / n))
     return Surface(chip_size=chip_size, rough=rough, ripple_amplitude=floor.ripple_amplitude,
                    ripple_wavelength=floor.ripple_wavelength, ripple_direction=floor.ripple_direction,
-                   ripple_phase=phase, rocks=_draw_rocks(rng, floor, chip_size))
+                   ripple_phase=phase, rocks=_draw_rocks(rng, floor, chip_size), ripple_wander=wander)
+
+
+def _wander(rng: np.random.Generator, n: int, sigma: float) -> np.ndarray:
+    """(n+1, n+1) periodic Gaussian field of unit sd smoothed over `sigma` grid steps: a crest wanders sideways
+    over about a wavelength along itself, as real sand ripples' crests bend and fork."""
+    fy, fx = np.fft.fftfreq(n)[:, None], np.fft.rfftfreq(n)[None, :]
+    response = np.exp(-2 * np.pi**2 * (fy**2 + fx**2) * sigma**2)
+    field = np.fft.irfft2(np.fft.rfft2(rng.standard_normal((n, n))) * response, s=(n, n))
+    return np.pad(field / max(field.std(), 1e-12), ((0, 1), (0, 1)), mode="wrap")
 
 
 def rocks(floor: Seafloor, chip_size: float, seed: int) -> tuple[tuple[float, float, float], ...]:

@@ -77,6 +77,8 @@ class Seafloor:
     ripple_amplitude: float = spec(0.0, nonneg, ">= 0", "m; sand-ripple amplitude")
     ripple_wavelength: float = spec(0.8, positive, "> 0", "m")
     ripple_direction: float = spec(0.0, None, "", "deg; direction of the ripple wave vector from +x (range)")
+    ripple_sinuosity: float = spec(0.0, nonneg, ">= 0", "sd of the crests' sideways wander, in wavelengths, over "
+                                   "about a wavelength along them (0: straight crests)")
     rocks: int = spec(0, nonneg, ">= 0", "number of rock/clutter bumps")
     rock_radius: float = spec(0.15, positive, "> 0", "m; size of each bump")
     backscatter: str = spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),
@@ -86,6 +88,10 @@ class Seafloor:
                              "strength over the floor (a gamma texture under the speckle: K-distributed clutter); "
                              "0 = uniform; above 2 most of the floor renders black")
     patch_size: float = spec(1.0, positive, "> 0", "m; width (FWHM) of the patches of stronger and weaker backscatter")
+    mosaic_contrast: float = spec(1.0, positive, "> 0", "backscatter of a second sediment / the first's, laid in "
+                                  "patches with sharp boundaries (1: one sediment)")
+    mosaic_share: float = spec(0.5, unit, "in [0, 1]", "share of the floor the second sediment covers, on average")
+    mosaic_size: float = spec(5.0, positive, "> 0", "m; width (FWHM) of the sediments' patches")
 
     @property
     def has_relief(self) -> bool:
