@@ -78,8 +78,9 @@ with open(f"{out}/MANIFEST.csv", "w", newline="") as f:
 print(f"{len(rows)} {sonar} chips in {out}")
 PY
 [ -d "$RUNS/$SONAR-split" ] || $SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
+TRAIN=$(ls "$RUNS/$SONAR-split/train/seafloor" | wc -l)  # --chips leaves 8 real chips out of each trial's draw
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
-    --chips 16 --minutes "$MINUTES" --contenders 1 --out "$RUNS/calibrate-$SONAR"
+    --chips $(( TRAIN - 8 < 16 ? TRAIN - 8 : 16 )) --minutes "$MINUTES" --contenders 1 --out "$RUNS/calibrate-$SONAR"
 $SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
 $SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \

@@ -144,6 +144,18 @@ def test_speckle_grainier_in_patches_reads_as_contrast_wander_and_a_level_change
     assert abs(np.median(targets) - np.median(plain)) < 0.02, (plain, targets)
 
 
+def test_a_seabed_brighter_and_darker_in_patches_raises_the_seabed_contrast_and_a_target_does_not():
+    """A plain speckle's low-pass stays near its chance level; a seabed times exp(0.3 x a smooth field) stands out
+    by about 0.3 above it; a target and its shadow, left out of the floor, add nothing."""
+    rng = np.random.default_rng(7)
+    field = ndimage.gaussian_filter(rng.standard_normal((SIZE, SIZE)), 8.0, mode="wrap")
+    plain = [image_statistics(FLOOR * speckle(rng))["seabed"] for _ in range(4)]
+    patchy = [image_statistics(FLOOR * np.exp(0.3 * field / field.std()) * speckle(rng))["seabed"] for _ in range(4)]
+    targets = [image_statistics(target_chip(rng))["seabed"] for _ in range(4)]
+    assert np.median(plain) < 0.06 and np.median(patchy) > np.median(plain) + 0.2, (plain, patchy)
+    assert abs(np.median(targets) - np.median(plain)) < 0.02, (plain, targets)
+
+
 def test_ripples_raise_the_floor_periodicity_and_banding_does_not():
     rng = np.random.default_rng(4)
     rows, cols = np.mgrid[:SIZE, :SIZE]

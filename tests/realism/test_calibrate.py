@@ -263,6 +263,17 @@ def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_si
     assert distances["target"]["targets_found"] > 2, distances["target"]
 
 
+def test_on_floor_chips_the_objective_charges_a_seabed_fainter_than_the_real_one(tmp_path):
+    """Real floors of two sediments, one a third as strong as the other: renders of one sediment miss the seabed's
+    contrast by several tolerances; new draws of the real floors' preset match it."""
+    with_target = PRESET.replace("GAIN", "0.3")
+    floor = with_target.split("[[targets]]")[0] + "[post]" + with_target.split("[post]")[1]
+    sediments = floor.replace("rms_height = 0.01", "rms_height = 0.01\nmosaic_contrast = 0.33\nmosaic_size = 6.0")
+    real, distances = distances_to_renders_of(sediments, {"truth": sediments, "one": floor}, tmp_path)
+    assert "seabed" in real.checked
+    assert distances["truth"]["seabed"] <= 1 and distances["one"]["seabed"] > 3, (distances["truth"], distances["one"])
+
+
 @pytest.mark.parametrize("share, real, renders", [(0.83, 115, 32), (0.5, 40, 16), (0.1, 60, 32)])
 def test_the_share_of_chips_with_a_target_is_held_to_two_standard_errors_of_its_draws(share, real, renders):
     """Real chips and a trial's renders drawn alike: their shares of chips with a target found fall within the tolerance
