@@ -12,7 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from sasmi.chips.stats import unexplained_spread
+from sasmi.chips.floor_texture import unexplained_spread
 from sasmi.eval.metrics import cores
 
 FOLDS = 5

@@ -2,7 +2,7 @@
 
 A Gaussian field smoothed over the patch size, cut at the level the second sediment's share sets, draws where each
 sediment lies. The field is drawn on a grid wider than the chip by four of its sigmas, so a patch larger than the
-chip leaves most chips one sediment and some crossed by one boundary, as real chips cut from a survey are; a field
+chip leaves many chips one sediment and crosses others with one boundary, as real chips cut from a survey are; a field
 drawn periodic on the chip would put a boundary through every chip.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ def _smooth_field(rng: np.random.Generator, size: int, sigma: float) -> np.ndarr
     return ndimage.map_coordinates(smoothed, [rows, cols], order=1, mode="nearest")
 
 
-def second_sediment(rng: np.random.Generator, size: int, sigma: float, share: float) -> np.ndarray:
+def _second_sediment(rng: np.random.Generator, size: int, sigma: float, share: float) -> np.ndarray:
     """(size, size) bool: where the second sediment lies, in patches of a field smoothed over `sigma` px;
     `share` of the floor on average over chips, any share on one chip."""
     field = _smooth_field(rng, size, sigma) + RAGGED * _smooth_field(rng, size, sigma / 6)
@@ -38,5 +38,5 @@ def second_sediment(rng: np.random.Generator, size: int, sigma: float, share: fl
 def mosaic(rng: np.random.Generator, size: int, sigma: float, share: float, contrast: float) -> np.ndarray:
     """(size, size) texture of mean 1 over chips: 1 on the first sediment, `contrast` on the second, both over
     (1 - share) + share x contrast, so a mosaic moves no floor's average level, only how it is spread."""
-    second = second_sediment(rng, size, sigma, share)
+    second = _second_sediment(rng, size, sigma, share)
     return np.where(second, contrast, 1.0) / ((1.0 - share) + share * contrast)

@@ -245,7 +245,8 @@ def test_floor_level_over_a_mask_is_each_columns_median_there():
 
 
 def test_speckle_looks_and_bands_are_those_of_each_whole_floor_block_and_row():
-    from sasmi.chips.stats import gain_swing, speckle_looks
+    from sasmi.chips.floor_texture import speckle_looks
+    from sasmi.chips.stats import gain_swing
 
     rng = np.random.default_rng(9)
     image = rng.gamma(3.0, 1.0 / 3.0, (70, 90)) * np.linspace(0.2, 0.5, 70)[:, None] ** 2  # blocks differ in level

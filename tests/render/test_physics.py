@@ -181,7 +181,7 @@ def test_speckle_wander_makes_the_speckle_grainier_in_some_patches_than_others()
     """post.speckle_wander / speckle_wander_length: the speckle's deviations from its mean times exp(w x field - w²),
     a field of unit sd smooth over speckle_wander_length, from its own stream (0: the speckle as it was); the noise
     floor's speckle wanders with it; `sasmi stats` reads it as the contrast's wander."""
-    from sasmi.chips.stats import contrast_wander
+    from sasmi.chips.floor_texture import contrast_wander
     from sasmi.render.post import post_fields
 
     size = 128
