@@ -50,16 +50,16 @@ def contrast_wander(image01: np.ndarray, floor: np.ndarray, block: int) -> float
     return float(unexplained_spread(level[None], contrast[None], usable[None])[0])
 
 
-def _highpassed_floor(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """(image / local mean - 1 on the usable floor, 0 elsewhere; where it is usable)."""
+def floor_lowpass(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The floor's local mean (a Gaussian of `sigma` px), where the floor is usable (above 2 gray levels), and the
+    high-passed floor (image / local mean - 1 there, 0 elsewhere): one blur for every statistic below."""
     local = filters.gaussian(image01, sigma=sigma, preserve_range=True)
     ok = floor & (local > 2.0 / 255.0)
-    return np.where(ok, image01 / np.maximum(local, 1e-6) - 1.0, 0.0), ok
+    return local, ok, np.where(ok, image01 / np.maximum(local, 1e-6) - 1.0, 0.0)
 
 
-def floor_autocorrelation(image01: np.ndarray, floor: np.ndarray, sigma: float) -> tuple[float, float]:
-    """1-px correlation coefficient of the high-passed floor (image / local mean - 1), along range and track."""
-    hp, ok = _highpassed_floor(image01, floor, sigma)
+def floor_autocorrelation(hp: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
+    """1-px correlation coefficient of the high-passed floor `hp` where `ok`, along range and track."""
 
     def corr(a, b, both):
         if both.sum() < 16:
@@ -74,21 +74,19 @@ def floor_autocorrelation(image01: np.ndarray, floor: np.ndarray, sigma: float) 
     return along_range, along_track
 
 
-def seabed_contrast(image01: np.ndarray, floor: np.ndarray, sigma: float) -> float:
-    """std / mean over the usable floor of its low-pass (the local mean the autocorrelation divides by): how strongly
-    the seabed (sand waves, sediment boundaries, relief) stands out above the speckle: about 0.2 on the shared MILCO
-    chips, 0.3 on the SASSED floors, 0.04 on a flat floor's 4-look speckle."""
-    local = filters.gaussian(image01, sigma=sigma, preserve_range=True)
-    seabed = local[floor & (local > 2.0 / 255.0)]
+def seabed_contrast(local: np.ndarray, ok: np.ndarray) -> float:
+    """std / mean over the usable floor `ok` of its low-pass `local` (the local mean the autocorrelation divides by):
+    how strongly the seabed (sand waves, sediment boundaries, relief) stands out above the speckle: about 0.2 on the
+    shared MILCO chips, 0.3 on the SASSED floors, 0.04 on a flat floor's 4-look speckle."""
+    seabed = local[ok]
     return float(seabed.std() / seabed.mean()) if seabed.size >= 16 else float("nan")
 
 
-def floor_periodicity(image01: np.ndarray, floor: np.ndarray, sigma: float, scale: float) -> float:
+def floor_periodicity(hp: np.ndarray, scale: float) -> float:
     """Strongest peak of the high-passed floor's power spectrum over its median, at wavelengths of
     2.5-11 px (at 128 px) in directions more than 10° off both axes: sand ripples as a regular
     stripe pattern, which none of the real chips show, give peaks far above speckle's flat
     spectrum. The axes are left out because sonar banding lies along them."""
-    hp, _ = _highpassed_floor(image01, floor, sigma)
     h, w = hp.shape
     window = np.hanning(h)[:, None] * np.hanning(w)[None, :]
     power = np.abs(np.fft.fftshift(np.fft.fft2(hp * window))) ** 2

@@ -22,8 +22,8 @@ from PIL import Image
 from scipy import ndimage
 from skimage import filters, measure, morphology
 
-from sasmi.chips.floor_texture import (contrast_wander, floor_autocorrelation, floor_periodicity, seabed_contrast,
-                                       speckle_looks)
+from sasmi.chips.floor_texture import (contrast_wander, floor_autocorrelation, floor_lowpass, floor_periodicity,
+                                       seabed_contrast, speckle_looks)
 from sasmi.errors import SasmiError
 from sasmi.images import list_images
 from sasmi.masks import read_mask
@@ -196,11 +196,12 @@ def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[
         out["shadow_floor"] = float(np.median(image01[target.shadow_pixels]) / np.mean(level[cols]))
         floor = ~_box_mask(image01.shape, [target.highlight, target.shadow], pad=max(2, round(3 * s)))
     out["looks"] = speckle_looks(image01, floor, max(4, round(est.block * s)))
-    out["acf_range"], out["acf_track"] = floor_autocorrelation(image01, floor, est.highpass_sigma * s)
-    out["periodicity"] = floor_periodicity(image01, floor, est.highpass_sigma * s, s)
+    local, ok, hp = floor_lowpass(image01, floor, est.highpass_sigma * s)
+    out["acf_range"], out["acf_track"] = floor_autocorrelation(hp, ok)
+    out["periodicity"] = floor_periodicity(hp, s)
     out["bands"] = gain_swing(image01, floor)
     out["wander"] = contrast_wander(image01, floor, max(4, round(est.block * s)))
-    out["seabed"] = seabed_contrast(image01, floor, est.highpass_sigma * s)
+    out["seabed"] = seabed_contrast(local, ok)
     third = w // 3
     near, far = image01[:, :third][floor[:, :third]], image01[:, -third:][floor[:, -third:]]
     if near.size and far.size and np.median(near) > 0:
