@@ -27,7 +27,7 @@ SASMI=.venv/bin/sasmi
 DATA=../shared/data/sonar-chips
 FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,\
 seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.ripple_wavelength,\
-seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.mosaic_contrast,seafloor.mosaic_share,seafloor.mosaic_size,\
+seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.ripple_sharpness,seafloor.mosaic_contrast,seafloor.mosaic_share,seafloor.mosaic_size,\
 seafloor.rocks,seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
 post.speckle_cell_track,post.noise_std,post.gain_swing,post.speckle_wander,post.gain.spread,seafloor.albedo.spread,\
 sonar.altitude.spread

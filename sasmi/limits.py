@@ -184,6 +184,7 @@ FIELDS: dict[str, Range] = {
     "seafloor.ripple_wavelength": Range(1e-3, METRES, "m; as correlation_length"),
     "seafloor.ripple_direction": ANGLE,
     "seafloor.ripple_sinuosity": Range(None, 10.0, "wavelengths; crests that wander further are noise"),
+    "seafloor.ripple_sharpness": Range(None, 100.0, "sharper crests are spikes narrower than the floor's samples"),
     "seafloor.mosaic_contrast": Range(1e-3, 1e3, "a sediment 1000 times weaker than the other renders black"),
     "seafloor.mosaic_size": Range(None, METRES, "m; as correlation_length"),
     "seafloor.rocks": Range(None, 1000, "each rock is one pass over the (size+1)² heightfield "

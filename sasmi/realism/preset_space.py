@@ -62,6 +62,7 @@ NAMED_ONLY = {
     "seafloor.ripple_wavelength": Knob(0.2, 10.0, True),
     "seafloor.ripple_direction": Knob(0.0, 180.0, False),  # a start's spread of 1 draws over [0, 2 x centre]
     "seafloor.ripple_sinuosity": Knob(0.0, 0.5, False),
+    "seafloor.ripple_sharpness": Knob(1.0, 8.0, True),  # 8: crests above half height over a fifth of a wavelength
     "seafloor.patchiness": Knob(0.0, 1.5, False, 2.0),
     "seafloor.patch_size": Knob(0.3, 20.0, True),
     "seafloor.mosaic_contrast": Knob(0.1, 10.0, True),  # 1: one sediment; darker or brighter second ones alike

@@ -10,6 +10,7 @@ checks the floor a 256 px render shows.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,7 @@ class Surface:
     ripple_phase: float
     rocks: tuple[tuple[float, float, float], ...]  # (centre x, centre y, radius), m
     ripple_wander: np.ndarray | None = None  # as rough: radians added to the ripples' phase (sinuous crests)
+    ripple_sharpness: float = 1.0  # Seafloor.ripple_sharpness: 1 a sinusoid
 
     def at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Heights (m) at points x, y (any equal shapes, m from the chip centre; clamped to the chip)."""
@@ -70,7 +72,9 @@ class Surface:
         phase = 2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase
         if self.ripple_wander is not None:
             phase = phase + self._grid_at(self.ripple_wander, x, y)
-        return self.ripple_amplitude * np.sin(phase)
+        if self.ripple_sharpness == 1:
+            return self.ripple_amplitude * np.sin(phase)
+        return self.ripple_amplitude * crest_profile(np.sin(phase), self.ripple_sharpness)
 
     def _rough_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return self._grid_at(self.rough, x, y)
@@ -95,6 +99,14 @@ class Surface:
             x, y = np.meshgrid(coords, coords)
             rough = self._rough_at(x, y)
         return self._add_shapes_grid(rough, coords)
+
+
+def crest_profile(sine: np.ndarray, sharpness: float) -> np.ndarray:
+    """A ripple's height in amplitudes at phase sin⁻¹(`sine`): ((1 + sine) / 2)^sharpness less its mean over a
+    wavelength, scaled so that crests stand 1 above the mean level. 1 is the sinusoid; larger ones narrow the crests
+    between flat troughs, as sand waves' (a lit crest a narrow bright band, not half the wavelength)."""
+    mean = math.exp(math.lgamma(sharpness + 0.5) - math.lgamma(sharpness + 1)) / math.sqrt(math.pi)
+    return (((1 + sine) / 2) ** sharpness - mean) / (1 - mean)
 
 
 def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
@@ -122,7 +134,8 @@ def surface(floor: Seafloor, chip_size: float, seed: int) -> Surface:
                                                               floor.ripple_wavelength / (chip_size / n))
     return Surface(chip_size=chip_size, rough=rough, ripple_amplitude=floor.ripple_amplitude,
                    ripple_wavelength=floor.ripple_wavelength, ripple_direction=floor.ripple_direction,
-                   ripple_phase=phase, rocks=_draw_rocks(rng, floor, chip_size), ripple_wander=wander)
+                   ripple_phase=phase, rocks=_draw_rocks(rng, floor, chip_size), ripple_wander=wander,
+                   ripple_sharpness=floor.ripple_sharpness)
 
 
 def _wander(rng: np.random.Generator, n: int, sigma: float) -> np.ndarray:

@@ -79,6 +79,9 @@ class Seafloor:
     ripple_direction: float = spec(0.0, None, "", "deg; direction of the ripple wave vector from +x (range)")
     ripple_sinuosity: float = spec(0.0, nonneg, ">= 0", "sd of the crests' sideways wander, in wavelengths, over "
                                    "about a wavelength along them (0: straight crests)")
+    ripple_sharpness: float = spec(1.0, lambda v: v >= 1, ">= 1", "the crests' profile ((1 + sin) / 2)^sharpness: "
+                                   "1 a sinusoid, larger narrower crests between flat troughs (sand waves); the "
+                                   "crests stay ripple_amplitude above the mean level")
     rocks: int = spec(0, nonneg, ">= 0", "number of rock/clutter bumps")
     rock_radius: float = spec(0.15, positive, "> 0", "m; size of each bump")
     backscatter: str = spec("lambert", lambda v: v in BACKSCATTER, "one of " + ", ".join(BACKSCATTER),

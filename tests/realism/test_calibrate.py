@@ -88,8 +88,8 @@ def test_default_in_params_stands_for_the_default_knobs():
     # ripples, the floor's patches and a second sediment are searched where named, and their knobs write a valid
     # preset
     named = {"seafloor.ripple_amplitude", "seafloor.ripple_wavelength", "seafloor.ripple_direction",
-             "seafloor.ripple_sinuosity", "seafloor.patchiness", "seafloor.patch_size", "seafloor.mosaic_contrast",
-             "seafloor.mosaic_share", "seafloor.mosaic_size"}
+             "seafloor.ripple_sinuosity", "seafloor.ripple_sharpness", "seafloor.patchiness", "seafloor.patch_size",
+             "seafloor.mosaic_contrast", "seafloor.mosaic_share", "seafloor.mosaic_size"}
     assert not named & set(DEFAULT_KNOBS)
     names = check_knobs(named_knobs("default,seafloor.patchiness,seafloor.patch_size"))
     raw = apply(load_preset("seafloor_only").raw, {"seafloor.patchiness": 0.6, "seafloor.patch_size": 4.0,
@@ -98,12 +98,14 @@ def test_default_in_params_stands_for_the_default_knobs():
     assert raw["seafloor"]["patchiness"] == {"uniform": [0.3, 0.9]} and raw["seafloor"]["patch_size"] == 4.0
     Preset.from_dict(raw)
     raw = apply(load_preset("seafloor_only").raw, {"seafloor.ripple_amplitude": 0.08, "seafloor.ripple_direction": 10.0,
-                                                   "seafloor.ripple_sinuosity": 0.1, "seafloor.mosaic_contrast": 0.3,
-                                                   "seafloor.mosaic_share": 0.4, "seafloor.mosaic_size": 8.0})
+                                                   "seafloor.ripple_sinuosity": 0.1, "seafloor.ripple_sharpness": 4.0,
+                                                   "seafloor.mosaic_contrast": 0.3, "seafloor.mosaic_share": 0.4,
+                                                   "seafloor.mosaic_size": 8.0})
     floor = raw["seafloor"]
     assert floor["ripple_amplitude"] == {"choice": [0.0, 0.08, 0.16]}  # the start's draws, scaled
     assert floor["ripple_direction"] == {"uniform": [0.0, 20.0]}  # the start's spread kept: [0, 2 x centre]
     assert (floor["mosaic_contrast"], floor["mosaic_share"], floor["mosaic_size"]) == (0.3, 0.4, 8.0)
+    assert floor["ripple_sharpness"] == 4.0
     Preset.from_dict(raw).sample(0, 0)
     with pytest.raises(SasmiError, match="twice"):
         check_knobs(named_knobs("default,post.gain.spread"))
