@@ -26,12 +26,12 @@ MINUTES=${2:-30}
 SONAR=${3:-sassed}
 SASMI=.venv/bin/sasmi
 DATA=../shared/data/sonar-chips
-FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,\
-seafloor.albedo,seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.ripple_wavelength,\
-seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.ripple_sharpness,seafloor.mosaic_contrast,seafloor.mosaic_share,seafloor.mosaic_size,\
-seafloor.rocks,seafloor.rock_radius,post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,\
-post.speckle_cell_track,post.noise_std,post.gain_swing,post.speckle_wander,post.gain.spread,seafloor.albedo.spread,\
-sonar.altitude.spread
+FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
+seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.ripple_wavelength,\
+seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.ripple_sharpness,seafloor.mosaic_contrast,\
+seafloor.mosaic_share,seafloor.mosaic_size,seafloor.rocks,seafloor.rock_radius,post.gain,post.tvg_strength,\
+post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,post.noise_std,post.gain_swing,\
+post.speckle_wander,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
 # the default knobs of commit 80abb38 (ripples among them, no track offset) but post.gain_swing, in their order
 NO_SWING=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
 seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,seafloor.rock_radius,\
@@ -107,7 +107,8 @@ $SASMI calibrate --real "$RUNS/split/train/targets" --preset cylinder_chip --min
 for run in calibrate-cylinder calibrate-cylinder-plain calibrate-cylinder-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
-$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" "$RUNS/calibrate-cylinder-plain/renders" \
+$SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-cylinder/renders" \
+    "$RUNS/calibrate-cylinder-plain/renders" \
     "$RUNS/calibrate-cylinder-variety/renders" "$RUNS/cylinder-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-cylinder/evaluate" \
     --set calibrated="$RUNS/calibrate-cylinder/renders" --set plain="$RUNS/calibrate-cylinder-plain/renders" \
