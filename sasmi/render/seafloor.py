@@ -72,7 +72,7 @@ class Surface:
         phase = 2 * np.pi * (x * np.cos(theta) + y * np.sin(theta)) / self.ripple_wavelength + self.ripple_phase
         if self.ripple_wander is not None:
             phase = phase + self._grid_at(self.ripple_wander, x, y)
-        if self.ripple_sharpness == 1:
+        if self.ripple_sharpness == 1:  # the sine itself: every sinusoidal floor renders bit for bit as before
             return self.ripple_amplitude * np.sin(phase)
         return self.ripple_amplitude * crest_profile(np.sin(phase), self.ripple_sharpness)
 
