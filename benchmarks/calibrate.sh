@@ -14,8 +14,8 @@
 #      beside 400 renders of the hand-matched cylinder_chip.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves, over FLOOR_KNOBS (the sand waves' size, direction, bends and crests and a second
-#      sediment among them); 400 renders against the held-back floors of that sonar, the φ-FID ratio and the
-#      two-sample test beside the start's.
+#      sediment among them), and seafloor_mixed (three kinds of seabed, one to a chip) over MIXED_KNOBS; 400 renders
+#      of each against the held-back floors of that sonar, the φ-FID ratio and the two-sample test beside the starts'.
 #   3. cylinder_chip (tuned by hand) calibrated to the same train targets as 1: the command as a user first runs
 #      it (the default start and knobs), then over NO_SWING as in 1; 400 renders of each against the validation
 #      targets beside cylinder_chip's own, the first with the two-sample test.
@@ -33,6 +33,16 @@ seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.ripple_sharpness,se
 seafloor.mosaic_share,seafloor.mosaic_size,seafloor.rocks,seafloor.rock_radius,post.gain,post.tvg_strength,\
 post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,post.noise_std,post.gain_swing,\
 post.speckle_wander,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
+# seafloor_mixed's three kinds of seabed (sand waves, rippled sand, two sediments): the geometry, gray levels and
+# speckle as FLOOR_KNOBS, the floor's level and relief alike in every kind, each kind's own features and the two
+# later kinds' weights against the first's
+MIXED_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
+seafloor.rms_height,seafloor.correlation_length,seafloor.rock_radius,seafloor[0].ripple_amplitude,\
+seafloor[0].ripple_wavelength,seafloor[0].ripple_direction,seafloor[0].ripple_sinuosity,\
+seafloor[0].ripple_sharpness,seafloor[1].weight,seafloor[1].ripple_amplitude,seafloor[1].ripple_wavelength,\
+seafloor[1].rocks,seafloor[2].weight,seafloor[2].mosaic_contrast,seafloor[2].mosaic_share,seafloor[2].mosaic_size,\
+post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,\
+post.noise_std,post.gain_swing,post.speckle_wander,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
 # the default knobs of commit 80abb38 (ripples among them, no track offset) but post.gain_swing, in their order
 NO_SWING=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
 seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,seafloor.rock_radius,\
@@ -87,12 +97,19 @@ PY
 TRAIN=$(ls "$RUNS/$SONAR-split/train/seafloor" | wc -l)  # --chips leaves 8 real chips out of each trial's draw
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \
     --chips $(( TRAIN - 8 < 16 ? TRAIN - 8 : 16 )) --minutes "$MINUTES" --contenders 1 --out "$RUNS/calibrate-$SONAR"
-$SASMI render "$RUNS/calibrate-$SONAR/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-$SONAR/renders"
+$SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_mixed --params "$MIXED_KNOBS" \
+    --chips $(( TRAIN - 8 < 16 ? TRAIN - 8 : 16 )) --minutes "$MINUTES" --contenders 1 \
+    --out "$RUNS/calibrate-$SONAR-kinds"
+for run in calibrate-$SONAR calibrate-$SONAR-kinds; do
+    $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
+done
 $SASMI render seafloor_only --count 400 --size 128 --out "$RUNS/seafloor-renders"
-$SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" "$RUNS/seafloor-renders" \
-    --check || true
+$SASMI render seafloor_mixed --count 400 --size 128 --out "$RUNS/mixed-renders"
+$SASMI stats "$RUNS/$SONAR-split/validation/seafloor" "$RUNS/calibrate-$SONAR/renders" \
+    "$RUNS/calibrate-$SONAR-kinds/renders" "$RUNS/seafloor-renders" "$RUNS/mixed-renders" --check || true
 $SASMI evaluate --real "$RUNS/$SONAR-split/validation/seafloor" --out "$RUNS/calibrate-$SONAR/two-sample" \
-    --set calibrated="$RUNS/calibrate-$SONAR/renders" --set seafloor_only="$RUNS/seafloor-renders"
+    --set calibrated="$RUNS/calibrate-$SONAR/renders" --set kinds="$RUNS/calibrate-$SONAR-kinds/renders" \
+    --set seafloor_only="$RUNS/seafloor-renders" --set seafloor_mixed="$RUNS/mixed-renders"
 
 $SASMI calibrate --real "$RUNS/split/train/targets" --minutes "$MINUTES" --out "$RUNS/calibrate-default"
 $SASMI render "$RUNS/calibrate-default/preset.toml" --count 400 --size 128 --out "$RUNS/calibrate-default/renders"

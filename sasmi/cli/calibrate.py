@@ -30,7 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"comma-separated knobs from: {', '.join(KNOBS)}, and FIELD.spread for the fields "
                         f"outside targets; 'default' is all of those but {', '.join(NAMED_ONLY)}, plus "
                         f"{', '.join(k for k in DEFAULT_KNOBS if k.endswith('.spread'))} "
-                        "('default,FIELD.spread' adds one)")
+                        "('default,FIELD.spread' adds one); with [[seafloor]] kinds in the preset, seafloor.FIELD "
+                        "sets every kind alike, seafloor[i].FIELD and seafloor[i].weight kind i alone")
     p.add_argument("--chips", type=int, default=d.chips, help=f"renders per trial (default: {d.chips})")
     p.add_argument("--size", type=int, default=d.size, help=f"render and statistics size (default: {d.size})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per pixel (default: {d.spp})")

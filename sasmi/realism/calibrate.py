@@ -190,6 +190,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     cfg = cfg.validate()
     out = Path(out)
     preset = load_preset(start)
+    x0 = start_values(preset.raw, cfg.params)  # a knob the preset cannot take (a kind it lacks) fails here
     encoder = as_encoder(phi)
     # read before anything is written: a bad folder leaves no RUN
     real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
@@ -203,7 +204,6 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                                                              "statistics": list(real.checked),
                                                              "found_tolerance": real.tolerances["targets_found"].high}}
         _check_record(out, record)
-        x0 = start_values(preset.raw, cfg.params)
         study = open_study(out, cfg, x0)
         stop = StopSignals()
         budget = cfg.minutes * 60

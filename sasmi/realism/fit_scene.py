@@ -135,9 +135,10 @@ def scaled_preset(preset: Preset, scales: dict[str, float]) -> dict:
         if name == "sonar.elevation" and raw.get("sonar", {}).get("altitude"):
             fields = (("sonar", "altitude"),)  # an altitude of its own: max_range stays
         for section, key in fields:
-            table = raw.setdefault(section, {})
             default = SECTIONS[section].__dataclass_fields__[key].default
-            table[key] = _scale_value(table.get(key, default), scale, 1.0 if name == "seafloor.albedo" else None)
+            tables = raw[section] if isinstance(raw.get(section), list) else [raw.setdefault(section, {})]
+            for table in tables:  # every [[seafloor]] kind alike
+                table[key] = _scale_value(table.get(key, default), scale, 1.0 if name == "seafloor.albedo" else None)
     targets = raw.get("targets", []) + [raw.get("target_grid", {}).get("target", {})]
     for target in targets:
         if target.get("mesh"):
@@ -276,8 +277,8 @@ def preset_toml(raw: dict) -> str:
 
     lines = [f"{k} = {value(v)}" for k, v in raw.items() if not isinstance(v, (dict, list))]
     for key, t in raw.items():
-        if key == "targets":
-            lines += [line for target in t for line in table("[[targets]]", target)]
+        if isinstance(t, list):  # [[targets]], [[seafloor]]
+            lines += [line for kind in t for line in table(f"[[{key}]]", kind)]
         elif isinstance(t, dict):
             lines += table(f"[{key}]", t)
             if "target" in t:  # target_grid.target

@@ -6,12 +6,18 @@ are factors on every [[targets]] kind's sizes, burial depths or along-track posi
 "FIELD.spread" searches how widely the field is drawn around its centre: uniform over centre x (1 ± spread), 0
 being a fixed value. A knob left out keeps the start preset's value and spread. docs/calibrate.md lists them and
 why each range.
+
+A start preset with [[seafloor]] kinds: "seafloor.FIELD" sets FIELD alike in every kind, "seafloor[i].FIELD" in
+kind i alone, and "seafloor[i].weight" searches kind i's weight (the other kinds keep theirs).
 """
 from __future__ import annotations
 
 import copy
 import math
+import re
 from dataclasses import dataclass
+
+import numpy as np
 
 from sasmi.errors import SasmiError
 from sasmi.scene.preset import SECTIONS
@@ -71,6 +77,8 @@ NAMED_ONLY = {
 }
 KNOBS.update(NAMED_ONLY)
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
+WEIGHT = Knob(0.1, 10.0, True)  # "seafloor[i].weight": a kind from a tenth to ten times as common as a kind of weight 1
+KIND = re.compile(r"seafloor\[(\d+)\]\.(.+)")  # "seafloor[1].ripple_amplitude": kind 1 of [[seafloor]] alone
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole
 TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale", "burial")
 TARGET_FIELDS = {"targets.size": TARGET_SIZES, "targets.burial": ("burial",), "targets.track_offset": ("y",)}
@@ -78,13 +86,23 @@ DEFAULT_KNOBS = (*(k for k in KNOBS if k not in NAMED_ONLY), "post.gain.spread",
                  "sonar.altitude.spread")
 
 
+def kind_of(name: str) -> tuple[str, int | None]:
+    """"seafloor[1].albedo.spread" -> ("seafloor.albedo.spread", 1); any other knob -> (name, None)."""
+    m = KIND.fullmatch(name)
+    return (f"seafloor.{m.group(2)}", int(m.group(1))) if m else (name, None)
+
+
 def knob(name: str) -> Knob:
-    if name.endswith(".spread") and name[:-len(".spread")] in KNOBS and not name.startswith("targets."):
+    field, kind = kind_of(name)  # a kind's knob is its field's, but for its weight
+    if field == "seafloor.weight" and kind is not None:
+        return WEIGHT
+    if field.endswith(".spread") and field[:-len(".spread")] in KNOBS and not field.startswith("targets."):
         return SPREAD
-    if name not in KNOBS:
+    if field not in KNOBS:
         raise SasmiError(f"--params: unknown parameter {name} (allowed: {', '.join(KNOBS)}, and FIELD.spread "
-                         "for each field outside targets)")
-    return KNOBS[name]
+                         "for each field outside targets; with [[seafloor]] kinds, seafloor[i].FIELD and "
+                         "seafloor[i].weight)")
+    return KNOBS[field]
 
 
 def named_knobs(text: str) -> tuple[str, ...]:
@@ -103,6 +121,11 @@ def check_knobs(names: tuple[str, ...]) -> tuple[str, ...]:
         knob(name)
     if len(set(names)) != len(names):
         raise SasmiError(f"--params: {', '.join(names)} names a parameter twice")
+    for name in names:
+        field, kind = kind_of(name)
+        if kind is not None and field in names:
+            raise SasmiError(f"--params: {name} and {field} (every kind alike) both set kind {kind}'s field "
+                             f"(allowed: one of them)")
     return names
 
 
@@ -131,17 +154,43 @@ def _field(raw: dict, section: str, key: str):
     return raw.get(section, {}).get(key, SECTIONS[section].__dataclass_fields__[key].default)
 
 
+def _tables(raw: dict, name: str, create: bool = False) -> list[dict]:
+    """The preset tables knob `name` sets: its section's; every [[seafloor]] kind's, or kind i's alone for
+    "seafloor[i]...". `create`: add a missing section to `raw` (which `apply` then writes)."""
+    field, kind = kind_of(name)
+    section = field.split(".")[0]
+    value = raw.get(section)
+    if section == "seafloor" and isinstance(value, list):
+        if kind is None:
+            return value
+        if kind >= len(value):
+            raise SasmiError(f"--params: {name}: the start preset has {len(value)} [[seafloor]] kinds "
+                             f"(allowed: seafloor[0] to seafloor[{len(value) - 1}])")
+        return [value[kind]]
+    if kind is not None:
+        raise SasmiError(f"--params: {name}: the start preset has one [seafloor] table (allowed: {field}, or "
+                         "[[seafloor]] kinds in the preset)")
+    return [raw.setdefault(section, {}) if create else raw.get(section, {})]
+
+
+def _value(table: dict, field: str):
+    """The value of `field` ("seafloor.albedo", or a kind's "seafloor.weight") in one table, or its default."""
+    section, key = field.split(".")
+    return table.get(key, 1.0 if key == "weight" else SECTIONS[section].__dataclass_fields__[key].default)
+
+
 def start_values(raw: dict, names: tuple[str, ...]) -> dict[str, float]:
-    """Each knob's value in the start preset `raw`, clipped into its range."""
+    """Each knob's value in the start preset `raw`, clipped into its range (a field set in every [[seafloor]]
+    kind alike: the mean over the kinds)."""
     raw = explicit_geometry(raw)
     values = {}
     for name in names:
         if name.startswith("targets."):
             value = 1.0
         else:
-            field = name[:-len(".spread")] if name.endswith(".spread") else name
-            value = _field(raw, *field.split("."))
-            value = spread(value) if name.endswith(".spread") else centre(value)
+            field = kind_of(name)[0].removesuffix(".spread")
+            measure = spread if name.endswith(".spread") else centre
+            value = float(np.mean([measure(_value(t, field)) for t in _tables(raw, name)]))
         k = knob(name)
         values[name] = min(max(value, k.low), k.high)
     return values
@@ -197,17 +246,20 @@ def apply(raw: dict, values: dict[str, float]) -> dict:
                     if key in table:  # a size left out keeps its default: it may not apply to the shape
                         table[key] = _scaled(table[key], v)
             continue
-        if name.endswith(".spread"):
+        field = kind_of(name)[0]
+        if field == "seafloor.weight":
+            _tables(raw, name)[0]["weight"] = _rounded(v, False)
             continue
-        section, key = name.split(".")
-        table = raw.setdefault(section, {})
-        table[key] = _with_centre_and_spread(_field(raw, section, key), v, values.get(f"{name}.spread"), KNOBS[name])
-    for name, s in values.items():  # a spread whose centre is not searched keeps the start's centre
-        field = name[:-len(".spread")]
-        if name.endswith(".spread") and field not in values:
-            section, key = field.split(".")
-            raw.setdefault(section, {})[key] = _with_centre_and_spread(_field(raw, section, key), centre(_field(raw, section, key)),
-                                                        s, KNOBS[field])
+        if name.endswith(".spread") and name[:-len(".spread")] in values:
+            continue  # set with its centre
+        centre_name = name.removesuffix(".spread")
+        field = field.removesuffix(".spread")
+        for table in _tables(raw, name, create=True):
+            value = _value(table, field)
+            # a spread whose centre is not searched keeps the start's centre
+            c = values[centre_name] if centre_name in values else centre(value)
+            table[field.split(".")[1]] = _with_centre_and_spread(value, c, values.get(f"{centre_name}.spread"),
+                                                                 KNOBS[field])
     sonar = raw["sonar"]
     far = max(_ends(_field(raw, "sonar", "near_range"))) + max(_ends(_field(raw, "sonar", "chip_size")))
     if _field(raw, "sonar", "max_range") < far:

@@ -95,6 +95,8 @@ class Seafloor:
                                   "patches with sharp boundaries (1: one sediment)")
     mosaic_share: float = spec(0.5, unit, "in [0, 1]", "share of the floor the second sediment covers, on average")
     mosaic_size: float = spec(5.0, positive, "> 0", "m; width (FWHM) of the sediments' patches")
+    name: str = spec("", None, "", "what this seabed is ('sand waves'), written to each chip's labels: with "
+                     "[[seafloor]] kinds, the kind the chip drew")
 
     @property
     def has_relief(self) -> bool:
@@ -170,9 +172,10 @@ class Scene:
     post: Post = Post()
     seed: int = 0  # drives the heightfield, rocks, speckle and the sampler
 
-    def validate(self, names: tuple[str, ...] = ()) -> "Scene":
+    def validate(self, names: tuple[str, ...] = (), floor: str = "seafloor") -> "Scene":
         """Cross-field checks; raises SasmiError naming the field. `names[i]`: the preset table of target i
-        (targets drawn by kind come from the table of their kind); default targets[i]."""
+        (targets drawn by kind come from the table of their kind); default targets[i]. `floor`: the table of
+        the seafloor (seafloor[k] for a kind of [[seafloor]])."""
         s = self.sonar
         if s.near_range + s.chip_size > s.max_range:
             raise SasmiError(f"sonar.near_range: chip far edge {s.near_range + s.chip_size:g} m exceeds "
@@ -181,7 +184,7 @@ class Scene:
         relief = 4 * f.rms_height + f.ripple_amplitude + (1.4 * f.rock_radius if f.rocks else 0.0)
         altitude = f"{s.array_altitude:g} m" + ("" if s.altitude else " (sonar.max_range / 10)")
         if relief >= s.array_altitude:  # the floor would hide the array: a black chip, not an error, otherwise
-            raise SasmiError(f"seafloor: relief up to {relief:g} m (4 rms_height + ripple_amplitude + 1.4 rock_radius) "
+            raise SasmiError(f"{floor}: relief up to {relief:g} m (4 rms_height + ripple_amplitude + 1.4 rock_radius) "
                              f"reaches the array at altitude {altitude}")
         half = s.chip_size / 2
         for i, t in enumerate(self.targets):

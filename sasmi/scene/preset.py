@@ -5,7 +5,8 @@ A preset value may be a plain value or a distribution, `{uniform = [lo, hi]}`,
 of scenes; `Preset.sample(seed, index)` draws scene `index` from a generator seeded by
 (seed, index) alone, so any scene can be re-made without the ones before it. With a
 top-level `targets_per_chip`, the [[targets]] tables are kinds of target drawn by `weight`
-(see `TargetKinds`); a [companions] table adds other objects off the chip's centre (see
+(see `TargetKinds`); [[seafloor]] tables in place of one [seafloor] are kinds of seabed, one drawn per
+chip by `weight` (see `SeafloorKinds`); a [companions] table adds other objects off the chip's centre (see
 `Companions`). Value checks and draws live in sasmi/scene/values.py.
 """
 from __future__ import annotations
@@ -22,7 +23,7 @@ from sasmi import limits
 from sasmi.errors import SasmiError
 from sasmi.scene.model import Post, Scene, Seafloor, Sonar, Target, TargetGrid, nonneg, positive, spec, unit
 from sasmi.scene.values import (check_table, check_value, companion_kinds, draw, read_small_file, sample_table,
-                                target_kinds)
+                                seafloor_kinds, target_kinds)
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,15 @@ class TargetKinds:
     targets_per_chip: int = spec(1, nonneg, ">= 0", "targets per chip, each drawn from the [[targets]] tables "
                                  "by their weight")
     weight: float = spec(1.0, nonneg, ">= 0", "a [[targets]] table's share of the draws (with targets_per_chip)")
+
+
+@dataclass(frozen=True)
+class SeafloorKinds:
+    """Seabeds of several kinds in one preset: real surveys cross sand waves, flat mud and patches of other
+    sediments, and a chip shows one of them. Each [[seafloor]] table is a kind (every [seafloor] field, its
+    own values and ranges), and each chip's floor is drawn from one kind picked with probability
+    weight / (sum of weights). A single [seafloor] table is the one kind of every chip."""
+    weight: float = spec(1.0, nonneg, ">= 0", "a [[seafloor]] table's share of the chips")
 
 
 @dataclass(frozen=True)
@@ -63,8 +73,11 @@ class Preset:
             if key not in TOP_KEYS:
                 raise SasmiError(f"{key}: unknown section (allowed: {', '.join(sorted(TOP_KEYS))})")
         for name, section in SECTIONS.items():
-            if name in raw:
+            if name in raw and name != "seafloor":
                 check_table(section, raw[name], name)
+        floors, floor_weights = seafloor_kinds(raw, SeafloorKinds)
+        for i, floor in enumerate(floors):
+            check_table(Seafloor, floor, "seafloor" if floor_weights is None else f"seafloor[{i}]")
         if not isinstance(raw.get("targets", []), list):
             raise SasmiError("targets: expected an array of tables ([[targets]])")
         targets, weights = target_kinds(raw, TargetKinds)
@@ -91,6 +104,10 @@ class Preset:
         for where, t in kinds.items():
             kind = preset.with_mesh_resolved(sample_table(Target, t, rng, where))
             dataclasses.replace(scene, targets=(kind,)).validate(names=(where,))
+        if floor_weights is not None:
+            for i, floor in enumerate(floors):
+                where = f"seafloor[{i}]"
+                dataclasses.replace(scene, seafloor=sample_table(Seafloor, floor, rng, where)).validate(floor=where)
         return preset
 
     def with_mesh_resolved(self, t: Target) -> Target:
@@ -106,7 +123,11 @@ class Preset:
     def sample(self, seed: int, index: int) -> Scene:
         rng = np.random.default_rng([seed, index])
         sonar = sample_table(Sonar, self.raw.get("sonar", {}), rng, "sonar")
-        seafloor = sample_table(Seafloor, self.raw.get("seafloor", {}), rng, "seafloor")
+        floors, floor_weights = seafloor_kinds(self.raw, SeafloorKinds)
+        # one [seafloor] table draws nothing here, so its scenes are drawn as they were before kinds
+        floor = 0 if floor_weights is None else int(rng.choice(len(floors), p=floor_weights))
+        floor_name = "seafloor" if floor_weights is None else f"seafloor[{floor}]"
+        seafloor = sample_table(Seafloor, floors[floor], rng, floor_name)
         post = sample_table(Post, self.raw.get("post", {}), rng, "post")
         tables, weights = target_kinds(self.raw, TargetKinds)
         if weights is None:
@@ -128,7 +149,7 @@ class Preset:
         targets = [self.with_mesh_resolved(t) for t in targets]
         scene_seed = int(rng.integers(2**31 - 1))
         return Scene(sonar=sonar, seafloor=seafloor, targets=tuple(targets), post=post, seed=scene_seed
-                     ).validate(names)
+                     ).validate(names, floor=floor_name)
 
     def _companions(self, sonar: Sonar, targets: list[Target], rng: np.random.Generator
                     ) -> tuple[list[Target], tuple[str, ...]]:

@@ -190,6 +190,21 @@ def target_kinds(raw: dict, kinds: type) -> tuple[list[dict], np.ndarray | None]
     return plain, _draw_probabilities(tables, kinds, "targets")
 
 
+def seafloor_kinds(raw: dict, kinds: type) -> tuple[list[dict], np.ndarray | None]:
+    """The seafloor tables of preset `raw`: [[seafloor]] kinds without their `weight` and the probability of
+    drawing each, or one [seafloor] table (or none) and None. `kinds`: the dataclass declaring `weight`."""
+    floor = raw.get("seafloor", {})
+    if isinstance(floor, dict):
+        return [floor], None
+    if not isinstance(floor, list) or not floor:
+        raise SasmiError("seafloor: expected a table ([seafloor]) or at least one [[seafloor]] table")
+    for i, t in enumerate(floor):
+        if not isinstance(t, dict):
+            raise SasmiError(f"seafloor[{i}]: expected a table, got {type(t).__name__}")
+    plain = [{k: v for k, v in t.items() if k != "weight"} for t in floor]
+    return plain, _draw_probabilities(floor, kinds, "seafloor")
+
+
 def _draw_probabilities(tables: list, kinds: type, section: str) -> np.ndarray:
     """Each kind table's `weight` (default 1) over the sum of them; errors name `section[i].weight`."""
     weights = []

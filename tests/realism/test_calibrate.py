@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 import tomllib
@@ -109,6 +110,33 @@ def test_default_in_params_stands_for_the_default_knobs():
     Preset.from_dict(raw).sample(0, 0)
     with pytest.raises(SasmiError, match="twice"):
         check_knobs(named_knobs("default,post.gain.spread"))
+
+
+def test_knobs_on_seafloor_kinds_set_every_kind_or_the_one_they_name():
+    raw = load_preset("seafloor_mixed").raw  # three kinds: sand waves, rippled sand, two sediments
+    names = check_knobs(("seafloor.albedo", "seafloor[0].ripple_amplitude", "seafloor[2].weight",
+                         "seafloor[2].mosaic_contrast.spread"))
+    x0 = start_values(raw, names)
+    assert x0 == pytest.approx({"seafloor.albedo": 0.45, "seafloor[0].ripple_amplitude": 0.1, "seafloor[2].weight": 1.0,
+                                "seafloor[2].mosaic_contrast.spread": 1 / 3})
+    moved = apply(raw, {"seafloor.albedo": 0.2, "seafloor[0].ripple_amplitude": 0.05, "seafloor[2].weight": 3.0,
+                        "seafloor[2].mosaic_contrast.spread": 0.0})
+    kinds = moved["seafloor"]
+    assert [k["albedo"] for k in kinds] == [{"uniform": [0.1333, 0.2667]}] * 3  # every kind, each keeping its spread
+    assert kinds[0]["ripple_amplitude"] == {"uniform": [0.025, 0.075]}
+    assert kinds[1]["ripple_amplitude"] == raw["seafloor"][1]["ripple_amplitude"]  # another kind's field stays
+    assert kinds[2]["mosaic_contrast"] == 0.45 and kinds[2]["weight"] == 3.0
+    assert "weight" not in kinds[1] or kinds[1]["weight"] == 1.0
+    floors = [Preset.from_dict(moved).sample(0, i).seafloor for i in range(300)]
+    assert 0.52 < np.mean([f.mosaic_contrast != 1 for f in floors]) < 0.68  # 3 / (1 + 1 + 3)
+    for names, words in ((("seafloor[3].albedo",), "has 3 [[seafloor]] kinds"),
+                         (("seafloor[0].weight.spread",), "unknown parameter seafloor[0].weight.spread")):
+        with pytest.raises(SasmiError, match=re.escape(words)):
+            start_values(raw, check_knobs(names))
+    with pytest.raises(SasmiError, match=re.escape("one [seafloor] table (allowed: seafloor.albedo")):
+        start_values(load_preset("seafloor_only").raw, ("seafloor[0].albedo",))
+    with pytest.raises(SasmiError, match=re.escape("seafloor[1].albedo and seafloor.albedo (every kind alike)")):
+        check_knobs(("seafloor.albedo", "seafloor[1].albedo"))
 
 
 def test_renders_grouped_by_structure_land_at_their_scene_index():
@@ -401,7 +429,8 @@ def test_cli_refuses_bad_input_in_one_line(known, tmp_path):
     for args, words in ((["--params", "post.gian"], "unknown parameter post.gian"),
                         (["--chips", "4"], "--chips"), (["--variety-weight", "-1"], "--variety-weight"),
                         (["--contenders", "0"], "--contenders"), (["--profile-trials", "-1"], "--profile-trials"),
-                        (["--preset", str(tmp_path / "none.toml")], "not found")):
+                        (["--preset", str(tmp_path / "none.toml")], "not found"),
+                        (["--params", "seafloor[0].albedo"], "one [seafloor] table")):
         done = subprocess.run([sys.executable, "-m", "sasmi", "calibrate", "--real", str(real), "--out",
                                str(tmp_path / "run"), *args], capture_output=True, text=True)
         assert done.returncode == 2 and words in done.stderr and "Traceback" not in done.stderr, done.stderr

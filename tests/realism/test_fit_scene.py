@@ -145,6 +145,9 @@ def test_scaled_preset_keeps_distributions_and_limits(tmp_path):
     assert raw["sonar"]["intensity"] == 3.0 and raw["sonar"]["max_range"] == 90.0  # defaults scaled too
     assert raw["targets"][0]["mesh"] == str(mesh)
     Preset.from_dict(raw)
+    kinds = scaled_preset(load_preset("seafloor_mixed"), {"seafloor.roughness": 2.0})["seafloor"]
+    assert [k["rms_height"] for k in kinds] == [{"uniform": [0.008, 0.04]}] * 3  # every [[seafloor]] kind alike
+    assert [k.get("ripple_amplitude") for k in kinds] == [{"uniform": [0.1, 0.3]}, {"choice": [0.01, 0.02]}, 0.0]
 
     scenes = [preset.sample(0, i) for i in range(3)]
     low, high = scale_bounds(scenes, ("seafloor.albedo", "sonar.elevation"))

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import textwrap
 
+import numpy as np
 import pytest
 
 from sasmi.cli.main import main
@@ -58,6 +59,15 @@ def write(tmp_path, text: str):
     ('targets_per_chip = 1\n[[targets]]\nweight = 1000\n[[targets]]\nweight = 0.001\nshape = "sphere"\nradius = 0.5\n'
      'burial = 1.5\n', "targets[1].burial: 1.5 m buries the whole target"),
     ('[[targets]]\nshape = "mesh"\n', "targets[0].mesh: a file path is required"),
+    # seafloor kinds
+    ('[[seafloor]]\nweight = -1\n', "seafloor[0].weight: -1.0 is not allowed (allowed: >= 0)"),
+    ('[[seafloor]]\nweight = 0\n[[seafloor]]\nweight = 0\n', "seafloor: every weight is 0"),
+    ('[[seafloor]]\n[[seafloor]]\nalbdeo = 0.5\n', "seafloor[1].albdeo: unknown key"),
+    ('[seafloor]\nweight = 2\n', "seafloor.weight: unknown key"),
+    ('seafloor = 3\n', "seafloor: expected a table ([seafloor]) or at least one [[seafloor]] table"),
+    # a kind that one chip's draw may not pick is still checked at load
+    ('[sonar]\naltitude = 1.0\n[[seafloor]]\nweight = 1000\n[[seafloor]]\nweight = 0.001\nrms_height = 0.2\n'
+     'ripple_amplitude = 0.4\n', "seafloor[1]: relief up to 1.2 m"),
     ("[sonar]\nnear_range = 58.0\n", "sonar.near_range: chip far edge"),
 ])
 def test_bad_preset_names_the_field(tmp_path, text, field):
@@ -178,6 +188,26 @@ def test_target_kinds_are_drawn_by_weight():
     assert all(1.0 <= t.length <= 2.0 for t in boxes) and len({t.length for t in boxes}) == len(boxes)
     assert all(t.radius == 0.4 and t.tube_radius == 0.1 for s in scenes for t in s.targets if t.shape == "torus")
     assert preset.sample(0, 7) == scenes[7]  # still a function of (seed, index) alone
+
+
+def test_seafloor_kinds_are_drawn_by_weight_and_one_table_draws_as_before():
+    kinds = [{"weight": 3, "name": "waves", "ripple_amplitude": {"uniform": [0.05, 0.1]}},
+             {"weight": 1, "mosaic_contrast": 0.4, "albedo": 0.3}, {"weight": 0, "rocks": 8}]
+    preset = Preset.from_dict({"seafloor": kinds})
+    floors = [preset.sample(0, i).seafloor for i in range(400)]
+    waves = [f for f in floors if f.ripple_amplitude > 0]
+    assert 0.68 < len(waves) / len(floors) < 0.82  # 3 : 1
+    assert all(f.mosaic_contrast == 1 and f.albedo == 0.5 and f.name == "waves" for f in waves)  # the rest default
+    assert all(f.mosaic_contrast == 0.4 and f.albedo == 0.3 and f.name == "" for f in floors if f.ripple_amplitude == 0)
+    assert not any(f.rocks for f in floors)  # weight 0: never drawn
+    assert len({f.ripple_amplitude for f in waves}) == len(waves)  # drawn per chip within the kind
+    assert preset.sample(0, 7).seafloor == floors[7]
+    # one [seafloor] table draws nothing more: every other draw of its scenes is as without kinds
+    one = {"seafloor": {"ripple_amplitude": {"uniform": [0.05, 0.1]}}, "post": {"gain": {"uniform": [0.3, 0.6]}}}
+    rng = np.random.default_rng([0, 3])  # the draws in field order: the ripples' amplitude, then the gain
+    amplitude, gain = rng.uniform(0.05, 0.1), rng.uniform(0.3, 0.6)
+    scene = Preset.from_dict(one).sample(0, 3)
+    assert (scene.seafloor.ripple_amplitude, scene.post.gain) == (amplitude, gain)
 
 
 def test_a_kinds_bad_draw_names_its_table():
