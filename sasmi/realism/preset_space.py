@@ -151,7 +151,7 @@ def spread(value) -> float:
 
 
 def _field(raw: dict, section: str, key: str):
-    return raw.get(section, {}).get(key, SECTIONS[section].__dataclass_fields__[key].default)
+    return _value(raw.get(section, {}), f"{section}.{key}")
 
 
 def _tables(raw: dict, name: str, create: bool = False) -> list[dict]:
