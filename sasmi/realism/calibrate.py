@@ -5,6 +5,7 @@ candidate preset (the same random draws in every trial, so two trials differ by 
 scores them against the real chips:
 
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
+                + signature_weight x mean over the nine signature statistics of min(|AUC - 0.5| / tolerance, 4)²
                 + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
 d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes), and the
@@ -14,8 +15,10 @@ ratio is the renders' FID to the real chips in φ over that of as many real chip
 chips are to each other), the renders' FID less the part of its small-sample bias that their own spread adds beyond
 the real chips' (else renders too alike would score better than real chips); the objective and its parts:
 sasmi/realism/calibration_objective.py. The first term pins what the statistics measure, the second the whole
-distribution of looks; the third (off by default: docs/calibrate.md) keeps them as varied as the real chips, which
-the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
+distribution of looks; the third the distributions of the plain statistics by which a classifier tells chips apart
+(`sasmi evaluate`'s signature: each statistic's ROC AUC, renders against real chips, over two standard errors of an
+AUC of one distribution), which a median within tolerance leaves free; the fourth (off by default: docs/calibrate.md)
+keeps them as varied as the real chips, which the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
 rerun continues it; --minutes counts the search time of all runs together.
 """
 from __future__ import annotations
@@ -33,7 +36,7 @@ import numpy as np
 from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
-from sasmi.realism.calibration_objective import RealChips, final_score, real_chips, score
+from sasmi.realism.calibration_objective import RealChips, Weights, final_score, real_chips, score
 from sasmi.realism.calibration_study import asked, calibrated_trial, full_disk_named, open_study, run_batch
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
@@ -57,6 +60,8 @@ class CalibrateConfig:
     spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
+    # weight of the signature statistics' AUCs: what keeps a classifier from telling the renders by plain statistics
+    signature_weight: float = 1.0
     variety_weight: float = 0.0  # weight of the recall shortfall: what keeps the renders as varied as the real chips
     # φ-FID less the small-sample bias the renders' own spread adds beyond the real chips' (False: the plain FID)
     spread_correction: bool = True
@@ -77,8 +82,9 @@ class CalibrateConfig:
         check_size(self.size, "--size")
         if self.sampler not in SAMPLERS:
             raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
-        if self.variety_weight < 0:
-            raise SasmiError(f"--variety-weight: {self.variety_weight:g} (allowed: >= 0)")
+        for flag, weight in (("--variety-weight", self.variety_weight), ("--signature-weight", self.signature_weight)):
+            if not weight >= 0:
+                raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
         if self.contenders < 1:
             raise SasmiError(f"--contenders: {self.contenders} (allowed: >= 1)")
         if self.profile_trials < 0:
@@ -89,6 +95,10 @@ class CalibrateConfig:
             raise SasmiError(f"--chips: {min(self.chips, self.final_chips)} (allowed: >= 8; medians of fewer "
                              "renders move with every draw)")
         return self
+
+    def weights(self) -> Weights:
+        return Weights(phi=self.phi_weight, signature=self.signature_weight, variety=self.variety_weight,
+                       spread_correction=self.spread_correction)
 
     def identity(self) -> dict:
         """What a rerun must share to continue the study: everything but the budget, where trials run and what
@@ -127,8 +137,8 @@ def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: Calib
         images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
     except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
         return {"objective": FAILED, "invalid": str(e)}
-    s = score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.spread_correction)
-    return {k: s[k] for k in ("objective", "statistics", "phi_ratio", "recall", "passed")}
+    s = score(images, real, encoder, cfg.weights())
+    return {k: s[k] for k in ("objective", "statistics", "signature", "phi_ratio", "recall", "passed")}
 
 
 @functools.lru_cache(maxsize=2)
@@ -246,7 +256,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         shown = {}
         for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
             images = render_chips(p, cfg.final_chips, final, final.seed)
-            shown[name] = (images, final_score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.seed))
+            shown[name] = (images, final_score(images, real, encoder, cfg.weights(), cfg.seed))
         refinement = None
         if cfg.refine_steps:
             best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
@@ -275,6 +285,6 @@ def refine(raw: dict, start: Preset, real: RealChips, encoder, cfg: CalibrateCon
         images = render_chips(Preset.from_dict(refined, path=start.path), cfg.final_chips, final, final.seed)
     except SasmiError as e:  # a scaled relief or altitude that breaks a rule in some scene
         return raw, calibrated, {**note, "kept": False, "invalid": str(e)}
-    score = final_score(images, real, encoder, cfg.phi_weight, cfg.variety_weight, cfg.seed)
+    score = final_score(images, real, encoder, cfg.weights(), cfg.seed)
     note.update(after=score["objective"], kept=score["objective"] < note["before"])
     return (refined, (images, score), note) if note["kept"] else (raw, calibrated, note)

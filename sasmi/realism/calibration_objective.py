@@ -1,6 +1,7 @@
 """`sasmi calibrate`'s objective: the real chips' reference figures, and the score of a trial's renders.
 
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
+                + signature_weight x mean over the nine signature statistics of min(|AUC - 0.5| / tolerance, 4)²
                 + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
 (sasmi/realism/calibrate.py says what each term holds; docs/calibrate.md, *What it minimises*.)
@@ -8,7 +9,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,8 @@ import numpy as np
 from sasmi.chips.compare import EVERY_CHIP_EXTRAS, TARGET_EXTRAS, TOLERANCES, Tolerance
 from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError
+from sasmi.eval.signature import STATISTICS as SIGNATURE
+from sasmi.eval.signature import chip_statistics as signature_statistics
 
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
 # the tolerances a calibration matches; the share of chips with a target found (`found_tolerance`) counts on every
@@ -29,6 +32,15 @@ HALF_SPLITS = 4  # fixed random halvings averaged, so that the luck of one halvi
 
 
 @dataclass(frozen=True)
+class Weights:
+    """What the objective adds to the statistics' term (sasmi/realism/calibrate.py says why each is there)."""
+    phi: float = 1.0  # the φ-FID ratio
+    signature: float = 1.0  # the nine signature statistics' distributions (`signature_distances`)
+    variety: float = 0.0  # recall's shortfall
+    spread_correction: bool = True  # φ-FID less the bias of the renders' own spread (False: the plain FID)
+
+
+@dataclass(frozen=True)
 class RealChips:
     folder: Path
     medians: dict[str, float]
@@ -38,6 +50,7 @@ class RealChips:
     phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
     phi_halves: float  # half-split FID of those `chips` real chips (`half_split_fid`), averaged over the same draws
     recall_reference: float  # share of the other real chips near `chips` real chips in φ, averaged over the same draws
+    signature: dict[str, np.ndarray]  # each signature statistic (sasmi.eval.signature) of every chip, (N,)
     images: np.ndarray  # (N, S, S) float32 in [0, 1]
 
 
@@ -57,6 +70,7 @@ def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, dr
     values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
     tolerances = {**OBJECTIVE, "targets_found": found_tolerance(values["targets_found"], len(images), chips)}
     return RealChips(Path(folder), values, checked, tolerances, phi, images=images,
+                     signature=signature_statistics(images),
                      **phi_references(phi, chips, seed, draws))
 
 
@@ -67,6 +81,29 @@ def found_tolerance(share: float, real: int, renders: int) -> Tolerance:
     the 115 MILCO train targets and 32 renders a trial give ± 0.15, 42 floors without one and 16 renders ± 0.09."""
     p = (share * real + 1) / (real + 2)
     return Tolerance("diff", 0.0, round(2 * math.sqrt(p * (1 - p) * (1 / renders + 1 / real)), 2))
+
+
+def signature_tolerance(real: int, renders: int) -> float:
+    """How far one statistic's ROC AUC, `renders` renders against `real` real chips, may lie from 0.5: two standard
+    errors of the AUC of two samples of one distribution (Mann-Whitney's U). 32 renders and 115 chips: ± 0.12."""
+    return 2 * math.sqrt((real + renders + 1) / (12 * real * renders))
+
+
+def signature_distances(images: np.ndarray, real: RealChips) -> dict[str, dict[str, float]]:
+    """Per signature statistic (sasmi.eval.signature: gray levels, grain, bands along track, shadow share, ...), the
+    ROC AUC by which it alone tells the renders from the real chips and how many tolerances that lies from 0.5. A
+    median within its tolerance still lets a classifier tell the chips apart where the renders' values sit mostly
+    above or below the real chips'; the AUC counts every chip, which is what the two-sample test sees."""
+    from scipy.stats import mannwhitneyu
+
+    ours = signature_statistics(images)
+    tolerance = signature_tolerance(len(real.phi), len(images))
+    out = {}
+    for name in SIGNATURE:
+        a, b = np.nan_to_num(ours[name]), np.nan_to_num(real.signature[name])
+        auc = float(mannwhitneyu(a, b).statistic / (len(a) * len(b)))  # P(render > real) + half the ties
+        out[name] = {"auc": auc, "distance": abs(auc - 0.5) / tolerance}
+    return out
 
 
 def phi_references(phi: np.ndarray, chips: int, seed: int, draws: int = 16) -> dict:
@@ -120,9 +157,9 @@ def medians(images: np.ndarray) -> dict[str, float]:
     return out
 
 
-def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float = 0.0,
-          spread_correction: bool = True) -> dict:
-    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, recall."""
+def score(images: np.ndarray, real: RealChips, encoder, weights: Weights = Weights()) -> dict:
+    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, the signature
+    statistics' AUCs, recall."""
     from sasmi.eval.features import phi_features
     from sasmi.eval.manifold import precision_recall
     from sasmi.eval.metrics import fid
@@ -130,26 +167,30 @@ def score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, varie
     ours = medians(images)
     distances = {k: real.tolerances[k].distance(real.medians[k], ours[k]) for k in real.checked}
     features = phi_features(encoder, images)
-    distance = (spread_corrected_fid(features, real.phi, real.phi_halves) if spread_correction
+    distance = (spread_corrected_fid(features, real.phi, real.phi_halves) if weights.spread_correction
                 else fid(features, real.phi))
     ratio = distance / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
+    signature = signature_distances(images, real)
+    signature_term = float(np.mean([min(s["distance"], FAR) ** 2 for s in signature.values()]))
     recall = precision_recall(real.phi, features)[1]
     shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
-    return {"objective": stats_term + phi_weight * ratio + variety_weight * shortfall, "statistics": stats_term,
+    objective = (stats_term + weights.phi * ratio + weights.signature * signature_term
+                 + weights.variety * shortfall)
+    return {"objective": objective, "statistics": stats_term, "signature": signature_term,
+            "signature_aucs": {k: s["auc"] for k, s in signature.items()},
             "phi_ratio": ratio, "recall": recall, "distances": distances, "medians": ours, "features": features,
             "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES)}
 
 
-def final_score(images: np.ndarray, real: RealChips, encoder, phi_weight: float, variety_weight: float,
-                seed: int) -> dict:
+def final_score(images: np.ndarray, real: RealChips, encoder, weights: Weights, seed: int) -> dict:
     """`score` with the φ-FID ratio, precision and recall of `sasmi evaluate` (matched sizes): the report's figures."""
     from sasmi.eval.manifold import precision_recall_matched
     from sasmi.eval.metrics import fid_ratio_matched
 
     # the report renders more chips than a trial, and the real chips' half-split FID is known at a trial's size
     # only (it does not fall as 1 / n in φ's dimensions), so this objective is the plain one
-    s = score(images, real, encoder, phi_weight, variety_weight, spread_correction=False)
+    s = score(images, real, encoder, replace(weights, spread_correction=False))
     ratio = fid_ratio_matched(s["features"], real.phi, 200, seed)
     precision, recall = precision_recall_matched(real.phi, s["features"], seed=seed)
     return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,

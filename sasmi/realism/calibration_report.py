@@ -144,6 +144,22 @@ def statistics_table(real, shown: dict) -> list[str]:
     return lines
 
 
+def signature_table(real, shown: dict) -> list[str]:
+    """Each signature statistic: the real chips' median and the ROC AUC by which it alone tells each set from them."""
+    from sasmi.realism.calibration_objective import SIGNATURE, signature_tolerance
+
+    tolerance = signature_tolerance(len(real.phi), len(shown["start"][0]))
+    lines = [f"How well each plain statistic alone tells the renders from the real chips (ROC AUC; 0.5 not at all, "
+             f"under 0.5 the renders' values run lower; within ± {tolerance:.2f} of 0.5 at these numbers of chips, "
+             "as two samples of one distribution would be; `sasmi evaluate`'s signature):", "",
+             "| statistic | real median | start | calibrated |", "|---|---|---|---|"]
+    for name, what in SIGNATURE.items():
+        aucs = [shown[n][1]["signature_aucs"][name] for n in ("start", "calibrated")]
+        cells = [f"{a:.2f}" + ("" if abs(a - 0.5) <= tolerance else " **far**") for a in aucs]
+        lines.append(f"| {name} ({what}) | {_number(float(np.median(real.signature[name])))} | {' | '.join(cells)} |")
+    return lines
+
+
 def objective_figure(study, path: Path) -> None:
     from matplotlib.figure import Figure
 
@@ -271,6 +287,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"calibrated {ratio['calibrated']}. Precision / recall in φ (recall: the share of real chips near some "
         f"render; low when the renders are alike): start {pr['start']}, calibrated {pr['calibrated']}.", "",
         *statistics_table(real, shown), "",
+        *signature_table(real, shown), "",
         *refinement_lines(refinement),
         *sensitivity_lines(pins, best.params, cfg.profile_trials), "",
         *together_lines(together, cfg.profile_trials), *([""] if together else []),

@@ -17,8 +17,8 @@ from PIL import Image
 from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.errors import SasmiError
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
-from sasmi.realism.calibration_objective import (found_tolerance, phi_references, real_chips, score,
-                                                 spread_corrected_fid)
+from sasmi.realism.calibration_objective import (Weights, found_tolerance, phi_references, real_chips, score,
+                                                 signature_tolerance, spread_corrected_fid)
 from sasmi.realism.preset_space import (DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, named_knobs, spread,
                                        start_values)
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
@@ -241,15 +241,16 @@ def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_
     truth = Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3")))
     varied = render_chips(truth, 16, cfg, seed=9)
     alike = np.repeat(varied[:1], 16, axis=0)
-    charge = {name: score(images, real, encoder, 1.0, 1.0)["objective"] - score(images, real, encoder, 1.0)["objective"]
+    charge = {name: score(images, real, encoder, Weights(variety=1.0))["objective"] - score(images, real, encoder)["objective"]
               for name, images in (("varied", varied), ("alike", alike))}
     assert charge["alike"] > 0.8 and charge["varied"] < 0.4, charge
-    assert score(alike, real, encoder, 1.0)["recall"] < 0.2
+    assert score(alike, real, encoder)["recall"] < 0.2
 
 
-def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path):
+def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path, part: str | None = "distances"):
     """40 renders of preset text `truth` as the real chips; each variant's 24 renders of other scenes scored against
-    them: (the real chips, variant -> the objective's tolerance distances)."""
+    them: (the real chips, variant -> the score's `part`, by default the objective's tolerance distances; None: the
+    whole score)."""
     from sasmi.eval.features import as_encoder
 
     cfg = CalibrateConfig(chips=24, size=64)
@@ -259,8 +260,9 @@ def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path):
         Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
     encoder = as_encoder(None)
     real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
-    return real, {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
-                              1.0)["distances"] for name, text in variants.items()}
+    scores = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real,
+                          encoder) for name, text in variants.items()}
+    return real, {name: s if part is None else s[part] for name, s in scores.items()}
 
 
 def test_the_objective_charges_targets_off_the_centre_row_a_missing_gain_swing_and_a_speckle_that_never_wanders(
@@ -280,6 +282,35 @@ def test_the_objective_charges_targets_off_the_centre_row_a_missing_gain_swing_a
                          ("no_wander", "wander")):
         for part in parts:
             assert (distances[name][part] > 1.5) if part == missed else (distances[name][part] <= 1), (name, distances)
+
+
+def test_the_signature_tolerance_is_two_standard_errors_of_the_auc_of_one_distribution():
+    """AUCs of 32 draws against 115 of one distribution spread by half the tolerance, and a shift of a third of a
+    standard deviation lies beyond it."""
+    from scipy.stats import mannwhitneyu
+
+    rng = np.random.default_rng(0)
+    aucs = [mannwhitneyu(rng.standard_normal(32), rng.standard_normal(115)).statistic / (32 * 115)
+            for _ in range(2000)]
+    assert signature_tolerance(115, 32) == pytest.approx(2 * np.std(aucs), rel=0.05)
+    shifted = np.mean([mannwhitneyu(rng.standard_normal(32) + 0.7, rng.standard_normal(115)).statistic / (32 * 115)
+                       for _ in range(200)])
+    assert shifted - 0.5 > signature_tolerance(115, 32), shifted
+
+
+def test_the_signature_term_charges_the_statistic_a_classifier_would_tell_the_renders_by(tmp_path):
+    """Real chips with a gain swing: new draws of their preset tell them by no plain statistic; the same preset
+    without the swing by its bands along track, brighter by its gray level, each several tolerances off 0.5."""
+    truth = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\n"
+    variants = {"truth": truth, "no_swing": truth.replace("gain_swing = 0.15", "gain_swing = 0.0"),
+                "brighter": truth.replace("gain = 0.3", "gain = 0.6")}
+    _, scores = distances_to_renders_of(truth, variants, tmp_path, part=None)
+    aucs, terms = ({n: s[part] for n, s in scores.items()} for part in ("signature_aucs", "signature"))
+    tolerance = signature_tolerance(40, 24)
+    assert all(abs(a - 0.5) <= 1.5 * tolerance for a in aucs["truth"].values()), aucs["truth"]
+    assert aucs["no_swing"]["bands along track"] < 0.5 - 2 * tolerance, aucs["no_swing"]
+    assert aucs["brighter"]["level"] > 0.5 + 2 * tolerance, aucs["brighter"]
+    assert terms["truth"] < 1 < min(terms["no_swing"], terms["brighter"]), terms
 
 
 def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_sizes(tmp_path):
