@@ -43,10 +43,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--variety-weight", type=float, default=d.variety_weight, metavar="W",
                    help="weight of the real chips no render lies near in φ (recall's shortfall), which keeps the "
                         f"renders as varied as the real chips (default: {d.variety_weight:g}, off; docs/calibrate.md)")
-    p.add_argument("--signature-weight", type=float, default=d.signature_weight, metavar="W",
-                   help="weight of how well each of nine plain statistics (gray level, grain, shadow share, bands "
-                        "along track, ...) alone tells the renders from the real chips, as a classifier would "
-                        f"(default: {d.signature_weight:g}; 0: off; docs/calibrate.md)")
+    p.add_argument("--distribution-weight", type=float, default=d.distribution_weight, metavar="W",
+                   help="weight of how well each statistic alone (target sizes, gray levels, grain, bands along "
+                        "track, ...) tells the renders from the real chips, chip by chip: their distributions, where "
+                        f"the tolerances match medians (default: {d.distribution_weight:g}; 0: off; docs/calibrate.md)")
     p.add_argument("--plain-fid", action="store_true",
                    help="score φ by the plain FID ratio, without taking off the small-sample bias by which renders "
                         "less varied than the real chips would score better (docs/calibrate.md)")
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = CalibrateConfig(params=named_knobs(args.params), minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
-                          variety_weight=args.variety_weight, signature_weight=args.signature_weight,
+                          variety_weight=args.variety_weight, distribution_weight=args.distribution_weight,
                           spread_correction=not args.plain_fid,
                           workers=args.workers, scheduler=args.scheduler,
                           contenders=args.contenders, profile_trials=args.profile_trials,

@@ -5,7 +5,7 @@ candidate preset (the same random draws in every trial, so two trials differ by 
 scores them against the real chips:
 
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
-                + signature_weight x mean over the nine signature statistics of min(|AUC - 0.5| / tolerance, 4)²
+                + distribution_weight x mean over the statistics of min(|AUC - 0.5| / tolerance, 4)²
                 + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
 d is how many `sasmi stats --check` tolerances the renders' median lies from the real chips' (<= 1 passes), and the
@@ -15,9 +15,9 @@ ratio is the renders' FID to the real chips in φ over that of as many real chip
 chips are to each other), the renders' FID less the part of its small-sample bias that their own spread adds beyond
 the real chips' (else renders too alike would score better than real chips); the objective and its parts:
 sasmi/realism/calibration_objective.py. The first term pins what the statistics measure, the second the whole
-distribution of looks; the third the distributions of the plain statistics by which a classifier tells chips apart
-(`sasmi evaluate`'s signature: each statistic's ROC AUC, renders against real chips, over two standard errors of an
-AUC of one distribution), which a median within tolerance leaves free; the fourth (off by default: docs/calibrate.md)
+distribution of looks; the third each statistic's distribution, chip by chip, which a median within tolerance leaves
+free and a classifier sees (the checked statistics and the nine of `sasmi evaluate`'s signature: each one's ROC AUC,
+renders against real chips, over two standard errors of an AUC of one distribution); the fourth (off by default: docs/calibrate.md)
 keeps them as varied as the real chips, which the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
 rerun continues it; --minutes counts the search time of all runs together.
 """
@@ -60,8 +60,8 @@ class CalibrateConfig:
     spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
-    # weight of the signature statistics' AUCs: what keeps a classifier from telling the renders by plain statistics
-    signature_weight: float = 1.0
+    # weight of the statistics' AUCs, chip by chip: what keeps most renders from lying on one side of most real chips
+    distribution_weight: float = 1.0
     variety_weight: float = 0.0  # weight of the recall shortfall: what keeps the renders as varied as the real chips
     # φ-FID less the small-sample bias the renders' own spread adds beyond the real chips' (False: the plain FID)
     spread_correction: bool = True
@@ -82,7 +82,7 @@ class CalibrateConfig:
         check_size(self.size, "--size")
         if self.sampler not in SAMPLERS:
             raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
-        for flag, weight in (("--variety-weight", self.variety_weight), ("--signature-weight", self.signature_weight)):
+        for flag, weight in (("--variety-weight", self.variety_weight), ("--distribution-weight", self.distribution_weight)):
             if not weight >= 0:
                 raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
         if self.contenders < 1:
@@ -97,7 +97,7 @@ class CalibrateConfig:
         return self
 
     def weights(self) -> Weights:
-        return Weights(phi=self.phi_weight, signature=self.signature_weight, variety=self.variety_weight,
+        return Weights(phi=self.phi_weight, distribution=self.distribution_weight, variety=self.variety_weight,
                        spread_correction=self.spread_correction)
 
     def identity(self) -> dict:
@@ -138,7 +138,7 @@ def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: Calib
     except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
         return {"objective": FAILED, "invalid": str(e)}
     s = score(images, real, encoder, cfg.weights())
-    return {k: s[k] for k in ("objective", "statistics", "signature", "phi_ratio", "recall", "passed")}
+    return {k: s[k] for k in ("objective", "statistics", "distribution", "phi_ratio", "recall", "passed")}
 
 
 @functools.lru_cache(maxsize=2)

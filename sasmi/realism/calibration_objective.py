@@ -1,7 +1,7 @@
 """`sasmi calibrate`'s objective: the real chips' reference figures, and the score of a trial's renders.
 
     objective = mean over the checked statistics of min(d, 4)²  +  phi_weight x φ-FID ratio
-                + signature_weight x mean over the nine signature statistics of min(|AUC - 0.5| / tolerance, 4)²
+                + distribution_weight x mean over the statistics of min(|AUC - 0.5| / tolerance, 4)²
                 + variety_weight x max(0, 1 - recall / the real chips' own recall)
 
 (sasmi/realism/calibrate.py says what each term holds; docs/calibrate.md, *What it minimises*.)
@@ -17,7 +17,6 @@ import numpy as np
 from sasmi.chips.compare import EVERY_CHIP_EXTRAS, TARGET_EXTRAS, TOLERANCES, Tolerance
 from sasmi.chips.stats import MASK_STATISTICS, STATISTICS, chip_statistics, image_statistics
 from sasmi.errors import SasmiError
-from sasmi.eval.signature import STATISTICS as SIGNATURE
 from sasmi.eval.signature import chip_statistics as signature_statistics
 
 FAR = 4.0  # tolerances: a statistic further off than this adds no more, so one cannot drown the rest
@@ -35,7 +34,7 @@ HALF_SPLITS = 4  # fixed random halvings averaged, so that the luck of one halvi
 class Weights:
     """What the objective adds to the statistics' term (sasmi/realism/calibrate.py says why each is there)."""
     phi: float = 1.0  # the φ-FID ratio
-    signature: float = 1.0  # the nine signature statistics' distributions (`signature_distances`)
+    distribution: float = 1.0  # the statistics' distributions, chip by chip (`distribution_distances`)
     variety: float = 0.0  # recall's shortfall
     spread_correction: bool = True  # φ-FID less the bias of the renders' own spread (False: the plain FID)
 
@@ -50,7 +49,9 @@ class RealChips:
     phi_reference: float  # FID of `chips` real chips to the other real chips, averaged over draws
     phi_halves: float  # half-split FID of those `chips` real chips (`half_split_fid`), averaged over the same draws
     recall_reference: float  # share of the other real chips near `chips` real chips in φ, averaged over the same draws
-    signature: dict[str, np.ndarray]  # each signature statistic (sasmi.eval.signature) of every chip, (N,)
+    # each statistic of the distribution term of every chip, (N,), NaN where a chip lacks it: the checked ones (but
+    # the share of chips with a target, a share of the whole set) and the nine of sasmi.eval.signature
+    per_chip: dict[str, np.ndarray]
     images: np.ndarray  # (N, S, S) float32 in [0, 1]
 
 
@@ -69,8 +70,8 @@ def real_chips(folder: str | Path, encoder, chips: int, size: int, seed: int, dr
     checked = (*(k for k in OBJECTIVE if targets or k not in (*MASK_STATISTICS, *TARGET_EXTRAS)), "targets_found")
     values = {k: s["median"] for k, s in stats["summary"].items()} | {"targets_found": stats["targets_found"]}
     tolerances = {**OBJECTIVE, "targets_found": found_tolerance(values["targets_found"], len(images), chips)}
-    return RealChips(Path(folder), values, checked, tolerances, phi, images=images,
-                     signature=signature_statistics(images),
+    per_chip = {k: stats["per_chip"][k] for k in checked if k != "targets_found"} | signature_statistics(images)
+    return RealChips(Path(folder), values, checked, tolerances, phi, images=images, per_chip=per_chip,
                      **phi_references(phi, chips, seed, draws))
 
 
@@ -83,26 +84,27 @@ def found_tolerance(share: float, real: int, renders: int) -> Tolerance:
     return Tolerance("diff", 0.0, round(2 * math.sqrt(p * (1 - p) * (1 / renders + 1 / real)), 2))
 
 
-def signature_tolerance(real: int, renders: int) -> float:
+def auc_tolerance(real: int, renders: int) -> float:
     """How far one statistic's ROC AUC, `renders` renders against `real` real chips, may lie from 0.5: two standard
     errors of the AUC of two samples of one distribution (Mann-Whitney's U). 32 renders and 115 chips: ± 0.12."""
     return 2 * math.sqrt((real + renders + 1) / (12 * real * renders))
 
 
-def signature_distances(images: np.ndarray, real: RealChips) -> dict[str, dict[str, float]]:
-    """Per signature statistic (sasmi.eval.signature: gray levels, grain, bands along track, shadow share, ...), the
-    ROC AUC by which it alone tells the renders from the real chips and how many tolerances that lies from 0.5. A
-    median within its tolerance still lets a classifier tell the chips apart where the renders' values sit mostly
-    above or below the real chips'; the AUC counts every chip, which is what the two-sample test sees."""
+def distribution_distances(ours: dict[str, np.ndarray], real: RealChips) -> dict[str, dict[str, float]]:
+    """Per statistic of `real.per_chip` (`ours`: the renders' values, chip by chip), the ROC AUC by which it alone
+    tells the renders from the real chips, over the chips where both show it, and how many tolerances that lies from
+    0.5. A median within its tolerance still lets a classifier tell the chips apart where most renders' values lie
+    above or below most real chips' (targets a little long in most chips, shadows covering a little more of each);
+    the AUC counts every chip, as the two-sample test sees them."""
     from scipy.stats import mannwhitneyu
 
-    ours = signature_statistics(images)
-    tolerance = signature_tolerance(len(real.phi), len(images))
     out = {}
-    for name in SIGNATURE:
-        a, b = np.nan_to_num(ours[name]), np.nan_to_num(real.signature[name])
+    for name, values in real.per_chip.items():
+        a, b = ours[name][np.isfinite(ours[name])], values[np.isfinite(values)]
+        if len(a) < 2 or len(b) < 2:  # a target statistic where (nearly) no render shows one: the share says so
+            continue
         auc = float(mannwhitneyu(a, b).statistic / (len(a) * len(b)))  # P(render > real) + half the ties
-        out[name] = {"auc": auc, "distance": abs(auc - 0.5) / tolerance}
+        out[name] = {"auc": auc, "distance": abs(auc - 0.5) / auc_tolerance(len(b), len(a))}
     return out
 
 
@@ -146,39 +148,43 @@ def spread_corrected_fid(features: np.ndarray, real_phi: np.ndarray, real_halves
     return fid(features, real_phi) - BIAS_SHARE * (half_split_fid(features) - real_halves)
 
 
-def medians(images: np.ndarray) -> dict[str, float]:
-    """Every statistic's median over the chips where it is found, and the share of chips with a target."""
+def per_chip_statistics(images: np.ndarray) -> dict[str, np.ndarray]:
+    """Every statistic of `sasmi stats` (NaN where a chip lacks it) and the nine of the signature, chip by chip."""
     rows = [image_statistics(im) for im in images]
-    out = {}
-    for k in STATISTICS:
-        v = np.array([r[k] for r in rows])
-        out[k] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else math.nan
-    out["targets_found"] = float(np.mean([math.isfinite(r["shadow_length"]) for r in rows]))
+    return {k: np.array([r[k] for r in rows]) for k in STATISTICS} | signature_statistics(images)
+
+
+def medians(per_chip: dict[str, np.ndarray]) -> dict[str, float]:
+    """Every statistic's median over the chips where it is found, and the share of chips with a target."""
+    out = {k: float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else math.nan
+           for k, v in per_chip.items() if k in STATISTICS}
+    out["targets_found"] = float(np.isfinite(per_chip["shadow_length"]).mean())
     return out
 
 
 def score(images: np.ndarray, real: RealChips, encoder, weights: Weights = Weights()) -> dict:
-    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, the signature
-    statistics' AUCs, recall."""
+    """The objective of a set of renders, with its parts: tolerance distances, passes, φ-FID ratio, the statistics'
+    AUCs, recall."""
     from sasmi.eval.features import phi_features
     from sasmi.eval.manifold import precision_recall
     from sasmi.eval.metrics import fid
 
-    ours = medians(images)
+    per_chip = per_chip_statistics(images)
+    ours = medians(per_chip)
     distances = {k: real.tolerances[k].distance(real.medians[k], ours[k]) for k in real.checked}
     features = phi_features(encoder, images)
     distance = (spread_corrected_fid(features, real.phi, real.phi_halves) if weights.spread_correction
                 else fid(features, real.phi))
     ratio = distance / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
-    signature = signature_distances(images, real)
-    signature_term = float(np.mean([min(s["distance"], FAR) ** 2 for s in signature.values()]))
+    aucs = distribution_distances(per_chip, real)
+    distribution_term = float(np.mean([min(s["distance"], FAR) ** 2 for s in aucs.values()]))
     recall = precision_recall(real.phi, features)[1]
     shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
-    objective = (stats_term + weights.phi * ratio + weights.signature * signature_term
+    objective = (stats_term + weights.phi * ratio + weights.distribution * distribution_term
                  + weights.variety * shortfall)
-    return {"objective": objective, "statistics": stats_term, "signature": signature_term,
-            "signature_aucs": {k: s["auc"] for k, s in signature.items()},
+    return {"objective": objective, "statistics": stats_term, "distribution": distribution_term,
+            "aucs": {k: s["auc"] for k, s in aucs.items()},
             "phi_ratio": ratio, "recall": recall, "distances": distances, "medians": ours, "features": features,
             "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES)}
 

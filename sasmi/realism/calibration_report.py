@@ -144,19 +144,26 @@ def statistics_table(real, shown: dict) -> list[str]:
     return lines
 
 
-def signature_table(real, shown: dict) -> list[str]:
-    """Each signature statistic: the real chips' median and the ROC AUC by which it alone tells each set from them."""
-    from sasmi.realism.calibration_objective import SIGNATURE, signature_tolerance
+def distribution_table(real, shown: dict) -> list[str]:
+    """Each statistic of the distribution term: the real chips' median and the ROC AUC by which it alone tells the
+    start's and the calibrated preset's renders from them."""
+    from sasmi.eval.signature import STATISTICS as SIGNATURE
+    from sasmi.realism.calibration_objective import auc_tolerance
 
-    tolerance = signature_tolerance(len(real.phi), len(shown["start"][0]))
-    lines = [f"How well each plain statistic alone tells the renders from the real chips (ROC AUC; 0.5 not at all, "
-             f"under 0.5 the renders' values run lower; within ± {tolerance:.2f} of 0.5 at these numbers of chips, "
-             "as two samples of one distribution would be; `sasmi evaluate`'s signature):", "",
+    tolerance = auc_tolerance(len(real.phi), len(shown["start"][0]))
+    lines = [f"How well each statistic alone tells the renders from the real chips, chip by chip (ROC AUC over the "
+             f"chips that show it; 0.5 not at all, under 0.5 the renders' values run lower; two samples of one "
+             f"distribution lie within about ± {tolerance:.2f} of 0.5 at these numbers of chips; the last nine are "
+             "`sasmi evaluate`'s signature):", "",
              "| statistic | real median | start | calibrated |", "|---|---|---|---|"]
-    for name, what in SIGNATURE.items():
-        aucs = [shown[n][1]["signature_aucs"][name] for n in ("start", "calibrated")]
-        cells = [f"{a:.2f}" + ("" if abs(a - 0.5) <= tolerance else " **far**") for a in aucs]
-        lines.append(f"| {name} ({what}) | {_number(float(np.median(real.signature[name])))} | {' | '.join(cells)} |")
+    for name, values in real.per_chip.items():
+        label = f"{STATISTICS[name][0]}" if name in STATISTICS else f"{name} ({SIGNATURE[name]})"
+        cells = []
+        for n in ("start", "calibrated"):
+            auc = shown[n][1]["aucs"].get(name)
+            cells.append("—" if auc is None else f"{auc:.2f}" + ("" if abs(auc - 0.5) <= tolerance else " **far**"))
+        median = float(np.nanmedian(values)) if np.isfinite(values).any() else math.nan
+        lines.append(f"| {label} | {_number(median)} | {' | '.join(cells)} |")
     return lines
 
 
@@ -287,7 +294,7 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"calibrated {ratio['calibrated']}. Precision / recall in φ (recall: the share of real chips near some "
         f"render; low when the renders are alike): start {pr['start']}, calibrated {pr['calibrated']}.", "",
         *statistics_table(real, shown), "",
-        *signature_table(real, shown), "",
+        *distribution_table(real, shown), "",
         *refinement_lines(refinement),
         *sensitivity_lines(pins, best.params, cfg.profile_trials), "",
         *together_lines(together, cfg.profile_trials), *([""] if together else []),

@@ -15,10 +15,11 @@ import pytest
 from PIL import Image
 
 from sasmi.chips.compare import TOLERANCES, Tolerance
+from sasmi.chips.stats import MASK_STATISTICS
 from sasmi.errors import SasmiError
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
 from sasmi.realism.calibration_objective import (Weights, found_tolerance, phi_references, real_chips, score,
-                                                 signature_tolerance, spread_corrected_fid)
+                                                 auc_tolerance, spread_corrected_fid)
 from sasmi.realism.preset_space import (DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, named_knobs, spread,
                                        start_values)
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
@@ -284,33 +285,37 @@ def test_the_objective_charges_targets_off_the_centre_row_a_missing_gain_swing_a
             assert (distances[name][part] > 1.5) if part == missed else (distances[name][part] <= 1), (name, distances)
 
 
-def test_the_signature_tolerance_is_two_standard_errors_of_the_auc_of_one_distribution():
-    """AUCs of 32 draws against 115 of one distribution spread by half the tolerance, and a shift of a third of a
-    standard deviation lies beyond it."""
+def test_the_auc_tolerance_is_two_standard_errors_of_the_auc_of_one_distribution():
+    """AUCs of 32 draws against 115 of one distribution spread by half the tolerance, and a shift of 0.7 standard
+    deviations lies beyond it."""
     from scipy.stats import mannwhitneyu
 
     rng = np.random.default_rng(0)
     aucs = [mannwhitneyu(rng.standard_normal(32), rng.standard_normal(115)).statistic / (32 * 115)
             for _ in range(2000)]
-    assert signature_tolerance(115, 32) == pytest.approx(2 * np.std(aucs), rel=0.05)
+    assert auc_tolerance(115, 32) == pytest.approx(2 * np.std(aucs), rel=0.05)
     shifted = np.mean([mannwhitneyu(rng.standard_normal(32) + 0.7, rng.standard_normal(115)).statistic / (32 * 115)
                        for _ in range(200)])
-    assert shifted - 0.5 > signature_tolerance(115, 32), shifted
+    assert shifted - 0.5 > auc_tolerance(115, 32), shifted
 
 
-def test_the_signature_term_charges_the_statistic_a_classifier_would_tell_the_renders_by(tmp_path):
-    """Real chips with a gain swing: new draws of their preset tell them by no plain statistic; the same preset
-    without the swing by its bands along track, brighter by its gray level, each several tolerances off 0.5."""
+def test_the_distribution_term_charges_the_statistic_a_classifier_would_tell_the_renders_by(tmp_path):
+    """Real chips with a gain swing: new draws of their preset lie on neither side of them by any statistic; the same
+    preset without the swing lies below by its bands along track, brighter above by its gray level, with targets
+    twice as long above by their sizes (yawed at random, they lengthen shadows along track and range), each several
+    tolerances off 0.5."""
     truth = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\n"
     variants = {"truth": truth, "no_swing": truth.replace("gain_swing = 0.15", "gain_swing = 0.0"),
-                "brighter": truth.replace("gain = 0.3", "gain = 0.6")}
+                "brighter": truth.replace("gain = 0.3", "gain = 0.6"),
+                "longer": truth.replace("length = 2.0", "length = 4.0")}
     _, scores = distances_to_renders_of(truth, variants, tmp_path, part=None)
-    aucs, terms = ({n: s[part] for n, s in scores.items()} for part in ("signature_aucs", "signature"))
-    tolerance = signature_tolerance(40, 24)
+    aucs, terms = ({n: s[part] for n, s in scores.items()} for part in ("aucs", "distribution"))
+    tolerance = auc_tolerance(40, 24)
     assert all(abs(a - 0.5) <= 1.5 * tolerance for a in aucs["truth"].values()), aucs["truth"]
     assert aucs["no_swing"]["bands along track"] < 0.5 - 2 * tolerance, aucs["no_swing"]
     assert aucs["brighter"]["level"] > 0.5 + 2 * tolerance, aucs["brighter"]
-    assert terms["truth"] < 1 < min(terms["no_swing"], terms["brighter"]), terms
+    assert max(aucs["longer"][k] for k in MASK_STATISTICS) > 0.5 + 2 * tolerance, aucs["longer"]
+    assert terms["truth"] < 1 < min(terms["no_swing"], terms["brighter"], terms["longer"]), terms
 
 
 def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_sizes(tmp_path):
