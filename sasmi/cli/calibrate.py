@@ -46,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--distribution-weight", type=float, default=d.distribution_weight, metavar="W",
                    help="weight of how well each statistic alone (target sizes, gray levels, grain, bands along "
                         "track, ...) tells the renders from the real chips, chip by chip: their distributions, where "
-                        f"the tolerances match medians (default: {d.distribution_weight:g}; 0: off; docs/calibrate.md)")
+                        f"the tolerances match medians (default: {d.distribution_weight:g}, off; docs/calibrate.md)")
     p.add_argument("--plain-fid", action="store_true",
                    help="score φ by the plain FID ratio, without taking off the small-sample bias by which renders "
                         "less varied than the real chips would score better (docs/calibrate.md)")

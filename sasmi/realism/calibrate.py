@@ -15,11 +15,12 @@ ratio is the renders' FID to the real chips in φ over that of as many real chip
 chips are to each other), the renders' FID less the part of its small-sample bias that their own spread adds beyond
 the real chips' (else renders too alike would score better than real chips); the objective and its parts:
 sasmi/realism/calibration_objective.py. The first term pins what the statistics measure, the second the whole
-distribution of looks; the third each statistic's distribution, chip by chip, which a median within tolerance leaves
-free and a classifier sees (the checked statistics and the nine of `sasmi evaluate`'s signature: each one's ROC AUC,
-renders against real chips, over two standard errors of an AUC of one distribution); the fourth (off by default: docs/calibrate.md)
-keeps them as varied as the real chips, which the φ-FID of a few renders does not. Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a
-rerun continues it; --minutes counts the search time of all runs together.
+distribution of looks; the third (off by default) each statistic's distribution, chip by chip, which a median within
+tolerance leaves free and a classifier sees (the checked statistics and the nine of `sasmi evaluate`'s signature: each
+one's ROC AUC, renders against real chips, over two standard errors of an AUC of one distribution); the fourth (off by
+default) keeps them as varied as the real chips, which the φ-FID of a few renders does not (docs/calibrate.md says
+what each did). Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a rerun continues it;
+--minutes counts the search time of all runs together.
 """
 from __future__ import annotations
 
@@ -61,7 +62,8 @@ class CalibrateConfig:
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     # weight of the statistics' AUCs, chip by chip: what keeps most renders from lying on one side of most real chips
-    distribution_weight: float = 1.0
+    # (off by default: from muscle_paper it cost the φ-FID ratio, and a classifier told the renders as well)
+    distribution_weight: float = 0.0
     variety_weight: float = 0.0  # weight of the recall shortfall: what keeps the renders as varied as the real chips
     # φ-FID less the small-sample bias the renders' own spread adds beyond the real chips' (False: the plain FID)
     spread_correction: bool = True
@@ -82,7 +84,8 @@ class CalibrateConfig:
         check_size(self.size, "--size")
         if self.sampler not in SAMPLERS:
             raise SasmiError(f"--sampler: {self.sampler!r} (allowed: {', '.join(SAMPLERS)})")
-        for flag, weight in (("--variety-weight", self.variety_weight), ("--distribution-weight", self.distribution_weight)):
+        for flag, weight in (("--variety-weight", self.variety_weight),
+                             ("--distribution-weight", self.distribution_weight)):
             if not weight >= 0:
                 raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
         if self.contenders < 1:

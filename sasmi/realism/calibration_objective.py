@@ -34,7 +34,7 @@ HALF_SPLITS = 4  # fixed random halvings averaged, so that the luck of one halvi
 class Weights:
     """What the objective adds to the statistics' term (sasmi/realism/calibrate.py says why each is there)."""
     phi: float = 1.0  # the φ-FID ratio
-    distribution: float = 1.0  # the statistics' distributions, chip by chip (`distribution_distances`)
+    distribution: float = 0.0  # the statistics' distributions, chip by chip (`distribution_distances`)
     variety: float = 0.0  # recall's shortfall
     spread_correction: bool = True  # φ-FID less the bias of the renders' own spread (False: the plain FID)
 

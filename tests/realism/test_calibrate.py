@@ -242,7 +242,8 @@ def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_
     truth = Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3")))
     varied = render_chips(truth, 16, cfg, seed=9)
     alike = np.repeat(varied[:1], 16, axis=0)
-    charge = {name: score(images, real, encoder, Weights(variety=1.0))["objective"] - score(images, real, encoder)["objective"]
+    charge = {name: score(images, real, encoder, Weights(variety=1.0))["objective"]
+              - score(images, real, encoder)["objective"]
               for name, images in (("varied", varied), ("alike", alike))}
     assert charge["alike"] > 0.8 and charge["varied"] < 0.4, charge
     assert score(alike, real, encoder)["recall"] < 0.2
@@ -316,6 +317,25 @@ def test_the_distribution_term_charges_the_statistic_a_classifier_would_tell_the
     assert aucs["brighter"]["level"] > 0.5 + 2 * tolerance, aucs["brighter"]
     assert max(aucs["longer"][k] for k in MASK_STATISTICS) > 0.5 + 2 * tolerance, aucs["longer"]
     assert terms["truth"] < 1 < min(terms["no_swing"], terms["brighter"], terms["longer"]), terms
+
+
+def test_the_distribution_weight_adds_the_distribution_term_to_the_objective(known):
+    """Off by default; with --distribution-weight W the objective rises by W times the term, and renders all alike
+    (one draw repeated) carry a larger term than new draws of the real chips' preset."""
+    from sasmi.eval.features import as_encoder
+
+    real_folder, _ = known
+    cfg = CalibrateConfig(chips=16, size=64)
+    encoder = as_encoder(None)
+    real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
+    varied = render_chips(Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3"))), 16, cfg, seed=9)
+    terms = {}
+    for name, images in (("varied", varied), ("alike", np.repeat(varied[:1], 16, axis=0))):
+        plain, weighted = score(images, real, encoder), score(images, real, encoder, Weights(distribution=2.0))
+        assert weighted["objective"] - plain["objective"] == pytest.approx(2 * plain["distribution"]), name
+        terms[name] = plain["distribution"]
+    assert CalibrateConfig().weights().distribution == 0
+    assert terms["alike"] > 2 * terms["varied"], terms
 
 
 def test_on_floor_chips_the_objective_charges_targets_found_and_ignores_their_sizes(tmp_path):
