@@ -157,7 +157,7 @@ def distribution_table(real, shown: dict) -> list[str]:
              "`sasmi evaluate`'s signature):", "",
              "| statistic | real median | start | calibrated |", "|---|---|---|---|"]
     for name, values in real.per_chip.items():
-        label = f"{STATISTICS[name][0]}" if name in STATISTICS else f"{name} ({SIGNATURE[name]})"
+        label = STATISTICS[name][0] if name in STATISTICS else f"{name} ({SIGNATURE[name]})"
         cells = []
         for n in ("start", "calibrated"):
             auc = shown[n][1]["aucs"].get(name)

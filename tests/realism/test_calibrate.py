@@ -386,6 +386,7 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     assert "post.gain: 0.75 ->" in (out / "preset.toml").read_text()
     assert "25 trials" in report and (out / "sheet.png").is_file() and (out / "objective.png").is_file()
     assert "Precision / recall in φ" in report
+    assert "How well each statistic alone tells the renders" in report and "| bands along track (" in report
     assert not (out / "ridges.png").exists() and "ridges.png" not in report  # one knob: no pair moves together
     assert json.loads((out / "together.json").read_text()) == {} and "What the chips pin together" not in report
     pins = json.loads((out / "sensitivity.json").read_text())["post.gain"]
@@ -414,15 +415,16 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     with pytest.raises(SasmiError, match="other settings \\(statistics\\)"):
         calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "trials": 30}), out, progress=False)
     (out / "calibrate.json").write_text(kept)
-    # the φ term is part of what a rerun must share: --plain-fid is named among the settings that differ
+    # the φ and distribution terms are part of what a rerun must share: named among the settings that differ
     refused = {}
-    for flag in ([], ["--plain-fid"]):
+    for flag in ([], ["--plain-fid"], ["--distribution-weight", "1"]):
         done = subprocess.run([sys.executable, "-m", "sasmi", "calibrate", "--real", str(real), "--preset", str(start),
                                "--params", "post.gain", "--chips", "16", "--size", "64", "--out", str(out), *flag],
                               capture_output=True, text=True)
         assert done.returncode == 2, done.stderr
         refused[tuple(flag)] = done.stderr
     assert "spread_correction" in refused[("--plain-fid",)] and "spread_correction" not in refused[()], refused
+    assert "distribution_weight" in refused[("--distribution-weight", "1")], refused
 
 
 def test_a_calibration_killed_inside_a_trial_resumes_exactly(known, tmp_path, monkeypatch):
