@@ -177,15 +177,17 @@ def score(images: np.ndarray, real: RealChips, encoder, weights: Weights = Weigh
                 else fid(features, real.phi))
     ratio = distance / real.phi_reference
     stats_term = float(np.mean([min(d, FAR) ** 2 for d in distances.values()]))
-    aucs = distribution_distances(per_chip, real)
-    distribution_term = float(np.mean([min(s["distance"], FAR) ** 2 for s in aucs.values()]))
+    # the AUCs cost every trial time: computed where the term is weighted, or for the report (`final_score`)
+    aucs = distribution_distances(per_chip, real) if weights.distribution else {}
+    distribution_term = float(np.mean([min(s["distance"], FAR) ** 2 for s in aucs.values()])) if aucs else None
     recall = precision_recall(real.phi, features)[1]
     shortfall = max(0.0, 1.0 - recall / max(real.recall_reference, 1e-6))
-    objective = (stats_term + weights.phi * ratio + weights.distribution * distribution_term
+    objective = (stats_term + weights.phi * ratio + (weights.distribution * distribution_term if aucs else 0.0)
                  + weights.variety * shortfall)
     return {"objective": objective, "statistics": stats_term, "distribution": distribution_term,
             "aucs": {k: s["auc"] for k, s in aucs.items()},
             "phi_ratio": ratio, "recall": recall, "distances": distances, "medians": ours, "features": features,
+            "per_chip": per_chip,
             "passed": sum(distances[k] <= 1 for k in distances if k in TOLERANCES)}
 
 
@@ -197,7 +199,8 @@ def final_score(images: np.ndarray, real: RealChips, encoder, weights: Weights, 
     # the report renders more chips than a trial, and the real chips' half-split FID is known at a trial's size
     # only (it does not fall as 1 / n in φ's dimensions), so this objective is the plain one
     s = score(images, real, encoder, replace(weights, spread_correction=False))
+    aucs = s["aucs"] or {k: d["auc"] for k, d in distribution_distances(s["per_chip"], real).items()}
     ratio = fid_ratio_matched(s["features"], real.phi, 200, seed)
     precision, recall = precision_recall_matched(real.phi, s["features"], seed=seed)
-    return {**s, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
+    return {**s, "aucs": aucs, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
             "recall": recall.value}

@@ -18,8 +18,8 @@ from sasmi.chips.compare import TOLERANCES, Tolerance
 from sasmi.chips.stats import MASK_STATISTICS
 from sasmi.errors import SasmiError
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
-from sasmi.realism.calibration_objective import (Weights, found_tolerance, phi_references, real_chips, score,
-                                                 auc_tolerance, spread_corrected_fid)
+from sasmi.realism.calibration_objective import (Weights, auc_tolerance, found_tolerance, phi_references, real_chips,
+                                                 score, spread_corrected_fid)
 from sasmi.realism.preset_space import (DEFAULT_KNOBS, KNOBS, apply, centre, check_knobs, named_knobs, spread,
                                        start_values)
 from sasmi.scene.preset import Preset, load_preset, shipped_presets
@@ -249,10 +249,11 @@ def test_the_variety_term_charges_renders_alike_and_spares_renders_as_varied_as_
     assert score(alike, real, encoder)["recall"] < 0.2
 
 
-def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path, part: str | None = "distances"):
+def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path, part: str | None = "distances",
+                            weights: Weights = Weights()):
     """40 renders of preset text `truth` as the real chips; each variant's 24 renders of other scenes scored against
-    them: (the real chips, variant -> the score's `part`, by default the objective's tolerance distances; None: the
-    whole score)."""
+    them with `weights`: (the real chips, variant -> the score's `part`, by default the objective's tolerance
+    distances; None: the whole score)."""
     from sasmi.eval.features import as_encoder
 
     cfg = CalibrateConfig(chips=24, size=64)
@@ -262,8 +263,8 @@ def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path, part
         Image.fromarray(np.round(image * 255).astype(np.uint8)).save(real_folder / f"{i:03d}.png")
     encoder = as_encoder(None)
     real = real_chips(real_folder, encoder, cfg.chips, cfg.size, cfg.seed)
-    scores = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real,
-                          encoder) for name, text in variants.items()}
+    scores = {name: score(render_chips(Preset.from_dict(tomllib.loads(text)), 24, cfg, seed=9), real, encoder,
+                          weights) for name, text in variants.items()}
     return real, {name: s if part is None else s[part] for name, s in scores.items()}
 
 
@@ -309,7 +310,7 @@ def test_the_distribution_term_charges_the_statistic_a_classifier_would_tell_the
     variants = {"truth": truth, "no_swing": truth.replace("gain_swing = 0.15", "gain_swing = 0.0"),
                 "brighter": truth.replace("gain = 0.3", "gain = 0.6"),
                 "longer": truth.replace("length = 2.0", "length = 4.0")}
-    _, scores = distances_to_renders_of(truth, variants, tmp_path, part=None)
+    _, scores = distances_to_renders_of(truth, variants, tmp_path, part=None, weights=Weights(distribution=1.0))
     aucs, terms = ({n: s[part] for n, s in scores.items()} for part in ("aucs", "distribution"))
     tolerance = auc_tolerance(40, 24)
     assert all(abs(a - 0.5) <= 1.5 * tolerance for a in aucs["truth"].values()), aucs["truth"]
@@ -320,8 +321,8 @@ def test_the_distribution_term_charges_the_statistic_a_classifier_would_tell_the
 
 
 def test_the_distribution_weight_adds_the_distribution_term_to_the_objective(known):
-    """Off by default; with --distribution-weight W the objective rises by W times the term, and renders all alike
-    (one draw repeated) carry a larger term than new draws of the real chips' preset."""
+    """Off by default (not computed); with --distribution-weight W the objective rises by W times the term, and
+    renders all alike (one draw repeated) carry a larger term than new draws of the real chips' preset."""
     from sasmi.eval.features import as_encoder
 
     real_folder, _ = known
@@ -331,9 +332,12 @@ def test_the_distribution_weight_adds_the_distribution_term_to_the_objective(kno
     varied = render_chips(Preset.from_dict(tomllib.loads(PRESET.replace("GAIN", "0.3"))), 16, cfg, seed=9)
     terms = {}
     for name, images in (("varied", varied), ("alike", np.repeat(varied[:1], 16, axis=0))):
-        plain, weighted = score(images, real, encoder), score(images, real, encoder, Weights(distribution=2.0))
-        assert weighted["objective"] - plain["objective"] == pytest.approx(2 * plain["distribution"]), name
-        terms[name] = plain["distribution"]
+        plain, once = score(images, real, encoder), score(images, real, encoder, Weights(distribution=1.0))
+        twice = score(images, real, encoder, Weights(distribution=2.0))
+        assert plain["distribution"] is None and plain["aucs"] == {}, name
+        assert once["objective"] - plain["objective"] == pytest.approx(once["distribution"]), name
+        assert twice["objective"] - plain["objective"] == pytest.approx(2 * once["distribution"]), name
+        terms[name] = once["distribution"]
     assert CalibrateConfig().weights().distribution == 0
     assert terms["alike"] > 2 * terms["varied"], terms
 
