@@ -2,7 +2,8 @@
 
 A knob is a preset field ("post.gain") whose centre is searched over a physical range that holds any
 sonar's value, so every start preset lies inside it; `targets.size`, `targets.burial` and `targets.track_offset`
-are factors on every [[targets]] kind's sizes, burial depths or along-track positions (1 = the start).
+are factors on every [[targets]] kind's sizes, burial depths or along-track positions (1 = the start), and
+`targets.length` on their lengths alone (cylinders', boxes'): with `targets.size` it sets their aspect.
 "FIELD.spread" searches how widely the field is drawn around its centre: uniform over centre x (1 ± spread), 0
 being a fixed value. A knob left out keeps the start preset's value and spread. docs/calibrate.md lists them and
 why each range.
@@ -74,6 +75,9 @@ NAMED_ONLY = {
     "seafloor.mosaic_contrast": Knob(0.1, 10.0, True),  # 1: one sediment; darker or brighter second ones alike
     "seafloor.mosaic_share": Knob(0.0, 1.0, False, 1.0),
     "seafloor.mosaic_size": Knob(0.5, 30.0, True),
+    # a factor on every kind's length alone: targets.size scales a target whole, so a search cannot lengthen a shadow
+    # along range (height) without widening it along track (length); real MILCO shadows are long and narrow
+    "targets.length": Knob(0.25, 4.0, True),
 }
 KNOBS.update(NAMED_ONLY)
 SPREAD = Knob(0.0, 0.9, False)  # "FIELD.spread": half-width of the draws / centre
@@ -81,7 +85,8 @@ WEIGHT = Knob(0.1, 10.0, True)  # "seafloor[i].weight": a kind from a tenth to t
 KIND = re.compile(r"seafloor\[(\d+)\]\.(.+)")  # "seafloor[1].ripple_amplitude": kind 1 of [[seafloor]] alone
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole
 TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale", "burial")
-TARGET_FIELDS = {"targets.size": TARGET_SIZES, "targets.burial": ("burial",), "targets.track_offset": ("y",)}
+TARGET_FIELDS = {"targets.size": TARGET_SIZES, "targets.burial": ("burial",), "targets.track_offset": ("y",),
+                 "targets.length": ("length",)}
 DEFAULT_KNOBS = (*(k for k in KNOBS if k not in NAMED_ONLY), "post.gain.spread", "seafloor.albedo.spread",
                  "sonar.altitude.spread")
 

@@ -61,6 +61,21 @@ def test_knobs_move_the_fields_they_name():
     assert raw["post"]["gain"] == {"uniform": [0.22, 0.68]}  # the start is not changed in place
 
 
+def test_the_length_knob_scales_lengths_alone_on_top_of_the_size():
+    raw = load_preset("cylinder_chip").raw
+    moved = apply(raw, {"targets.size": 2.0, "targets.length": 0.25})
+    Preset.from_dict(moved)
+    lengths = 0
+    for before, after in zip(raw["targets"], moved["targets"]):
+        if "length" in before:  # cylinders and boxes: twice as thick, half as long
+            lengths += 1
+            assert centre(after["length"]) == pytest.approx(0.5 * centre(before["length"]), rel=1e-3)
+        for key in ("radius", "width", "height", "tube_radius"):
+            if key in before:
+                assert centre(after[key]) == pytest.approx(2 * centre(before[key]), rel=1e-3), key
+    assert lengths >= 2  # the cylinders and boxes at least
+
+
 def test_altitude_is_written_out_before_the_range_moves():
     raw = load_preset("muscle_paper").raw  # no altitude: max_range / 10 = 6 m
     moved = apply(raw, {"sonar.chip_size": 40.0})
@@ -87,11 +102,11 @@ def test_default_in_params_stands_for_the_default_knobs():
     assert named_knobs("default") == DEFAULT_KNOBS
     assert named_knobs(" post.gain , sonar.altitude,") == ("post.gain", "sonar.altitude")
     assert named_knobs("default,post.tvg_strength.spread") == (*DEFAULT_KNOBS, "post.tvg_strength.spread")
-    # ripples, the floor's patches and a second sediment are searched where named, and their knobs write a valid
-    # preset
+    # ripples, the floor's patches, a second sediment and the targets' aspect are searched where named, and their
+    # knobs write a valid preset
     named = {"seafloor.ripple_amplitude", "seafloor.ripple_wavelength", "seafloor.ripple_direction",
              "seafloor.ripple_sinuosity", "seafloor.ripple_sharpness", "seafloor.patchiness", "seafloor.patch_size",
-             "seafloor.mosaic_contrast", "seafloor.mosaic_share", "seafloor.mosaic_size"}
+             "seafloor.mosaic_contrast", "seafloor.mosaic_share", "seafloor.mosaic_size", "targets.length"}
     assert not named & set(DEFAULT_KNOBS)
     names = check_knobs(named_knobs("default,seafloor.patchiness,seafloor.patch_size"))
     raw = apply(load_preset("seafloor_only").raw, {"seafloor.patchiness": 0.6, "seafloor.patch_size": 4.0,
