@@ -8,12 +8,12 @@
 # targets.track_offset and whose FLOOR_KNOBS lacked post.gain_swing: the script there gives their figures.
 #   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split: as the
 #      command stands, and again with --seed 1, 2 and 3 (other searches: other draws, other sampler paths) and with
-#      --distribution-weight 1 (each statistic's distribution matched, chip by chip); over the default knobs but the
-#      gain's swing (NO_SWING) as it stands, with the plain φ-FID ratio (--plain-fid), and with it and
-#      --variety-weight 1 (the last, as 2 and 3, calibrating the search's best: --contenders 1); 400 renders of each
-#      result against the validation targets: `sasmi stats --check`, the φ-FID ratio and the two-sample test beside
-#      400 renders of the hand-matched cylinder_chip, and the two-sample test of the target band and of the floor
-#      alone.
+#      --distribution-weight 1 (each statistic's distribution matched, chip by chip) and over the default knobs and
+#      targets.length (the targets' aspect); over the default knobs but the gain's swing (NO_SWING) as it stands,
+#      with the plain φ-FID ratio (--plain-fid), and with it and --variety-weight 1 (the last, as 2 and 3,
+#      calibrating the search's best: --contenders 1); 400 renders of each result against the validation targets:
+#      `sasmi stats --check`, the φ-FID ratio and the two-sample test beside 400 renders of the hand-matched
+#      cylinder_chip, and the two-sample test of the target band and of the floor alone.
 #   2. seafloor_only calibrated to the floor chips of one other sonar (SASSED by default, or klsg), split by
 #      scene group among themselves, over FLOOR_KNOBS (the sand waves' size, direction, bends and crests and a second
 #      sediment among them), and seafloor_mixed (three kinds of seabed, one to a chip) over MIXED_KNOBS; 400 renders
@@ -63,20 +63,24 @@ $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minu
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --distribution-weight 1 --out "$RUNS/calibrate-muscle-distribution"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
+    --params default,targets.length --out "$RUNS/calibrate-muscle-length"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --params "$NO_SWING" --out "$RUNS/calibrate-muscle-no-swing"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --params "$NO_SWING" --plain-fid --out "$RUNS/calibrate-muscle-plain"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --params "$NO_SWING" --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
 for run in calibrate-muscle calibrate-muscle-seed1 calibrate-muscle-seed2 calibrate-muscle-seed3 \
-    calibrate-muscle-distribution calibrate-muscle-no-swing calibrate-muscle-plain calibrate-muscle-variety; do
+    calibrate-muscle-distribution calibrate-muscle-length calibrate-muscle-no-swing calibrate-muscle-plain \
+    calibrate-muscle-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
 $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
 $SASMI render muscle_paper --count 400 --size 128 --out "$RUNS/muscle-renders"
 $SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-seed1/renders" \
     "$RUNS/calibrate-muscle-seed2/renders" "$RUNS/calibrate-muscle-seed3/renders" \
-    "$RUNS/calibrate-muscle-distribution/renders" "$RUNS/calibrate-muscle-no-swing/renders" \
+    "$RUNS/calibrate-muscle-distribution/renders" "$RUNS/calibrate-muscle-length/renders" \
+    "$RUNS/calibrate-muscle-no-swing/renders" \
     "$RUNS/calibrate-muscle-plain/renders" \
     "$RUNS/calibrate-muscle-variety/renders" "$RUNS/cylinder-renders" "$RUNS/muscle-renders" --check || true
 $SASMI evaluate --real "$RUNS/split/validation/targets" --no-two-sample --out "$RUNS/calibrate-muscle/evaluate" \
@@ -90,11 +94,13 @@ $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/calibrate-m
 $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/calibrate-muscle-distribution/two-sample" \
     --set distribution="$RUNS/calibrate-muscle-distribution/renders" --set seed0="$RUNS/calibrate-muscle/renders" \
     --set seed3="$RUNS/calibrate-muscle-seed3/renders" --set cylinder_chip="$RUNS/cylinder-renders"
+$SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/calibrate-muscle-length/two-sample" \
+    --set length="$RUNS/calibrate-muscle-length/renders" --set cylinder_chip="$RUNS/cylinder-renders"
 # which part of the chip tells them: the target band alone, then the floor alone
 for hide in floor target; do
     .venv/bin/python benchmarks/two_sample_seeds.py --real "$RUNS/split/validation/targets" --seeds 2 --hide $hide \
         "$RUNS/cylinder-renders" "$RUNS/calibrate-muscle-seed3/renders" "$RUNS/calibrate-muscle-distribution/renders" \
-        "$RUNS/calibrate-muscle/renders"
+        "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-length/renders"
 done
 
 # one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
