@@ -9,7 +9,9 @@
 #   1. muscle_paper (the paper's 6 m chip) calibrated to the MILCO train targets of the seed-0 split: as the
 #      command stands, and again with --seed 1, 2 and 3 (other searches: other draws, other sampler paths) and with
 #      --distribution-weight 1 (each statistic's distribution matched, chip by chip) and over the default knobs and
-#      targets.length (the targets' aspect); over the default knobs but the gain's swing (NO_SWING) as it stands,
+#      targets.length (the targets' aspect), and from muscle_paper with cylinder_chip's six kinds of target
+#      (benchmarks/target_kinds.py; the length search's preset is rendered with them too, all else as calibrated);
+#      over the default knobs but the gain's swing (NO_SWING) as it stands,
 #      with the plain φ-FID ratio (--plain-fid), and with it and --variety-weight 1 (the last, as 2 and 3,
 #      calibrating the search's best: --contenders 1); 400 renders of each result against the validation targets:
 #      `sasmi stats --check`, the φ-FID ratio and the two-sample test beside 400 renders of the hand-matched
@@ -64,6 +66,9 @@ $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minu
     --distribution-weight 1 --out "$RUNS/calibrate-muscle-distribution"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --params default,targets.length --out "$RUNS/calibrate-muscle-length"
+.venv/bin/python benchmarks/target_kinds.py muscle_paper cylinder_chip --out "$RUNS/muscle-kinds.toml"
+$SASMI calibrate --real "$RUNS/split/train/targets" --preset "$RUNS/muscle-kinds.toml" --minutes "$MINUTES" \
+    --out "$RUNS/calibrate-muscle-kinds"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --params "$NO_SWING" --out "$RUNS/calibrate-muscle-no-swing"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
@@ -71,15 +76,27 @@ $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minu
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --params "$NO_SWING" --plain-fid --variety-weight 1 --contenders 1 --out "$RUNS/calibrate-muscle-variety"
 for run in calibrate-muscle calibrate-muscle-seed1 calibrate-muscle-seed2 calibrate-muscle-seed3 \
-    calibrate-muscle-distribution calibrate-muscle-length calibrate-muscle-no-swing calibrate-muscle-plain \
+    calibrate-muscle-distribution calibrate-muscle-length calibrate-muscle-kinds calibrate-muscle-no-swing \
+    calibrate-muscle-plain \
     calibrate-muscle-variety; do
     $SASMI render "$RUNS/$run/preset.toml" --count 400 --size 128 --out "$RUNS/$run/renders"
 done
+# the length search's preset with cylinder_chip's kinds of target, all else as calibrated
+.venv/bin/python benchmarks/target_kinds.py "$RUNS/calibrate-muscle-length/preset.toml" cylinder_chip \
+    --out "$RUNS/calibrate-muscle-length/kinds.toml"
+$SASMI render "$RUNS/calibrate-muscle-length/kinds.toml" --count 400 --size 128 \
+    --out "$RUNS/calibrate-muscle-length/kinds-renders"
+# and with its targets placed as the real ones along range (about 10 px nearer than the centre on its 38 m chip)
+sed 's/^x = {uniform = \[-1.0, 0.0\]}/x = {uniform = [-3.6, -2.4]}/' "$RUNS/calibrate-muscle-length/preset.toml" \
+    > "$RUNS/calibrate-muscle-length/placed.toml"
+$SASMI render "$RUNS/calibrate-muscle-length/placed.toml" --count 400 --size 128 \
+    --out "$RUNS/calibrate-muscle-length/placed-renders"
 $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
 $SASMI render muscle_paper --count 400 --size 128 --out "$RUNS/muscle-renders"
 $SASMI stats "$RUNS/split/validation/targets" "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-seed1/renders" \
     "$RUNS/calibrate-muscle-seed2/renders" "$RUNS/calibrate-muscle-seed3/renders" \
     "$RUNS/calibrate-muscle-distribution/renders" "$RUNS/calibrate-muscle-length/renders" \
+    "$RUNS/calibrate-muscle-length/kinds-renders" "$RUNS/calibrate-muscle-kinds/renders" \
     "$RUNS/calibrate-muscle-no-swing/renders" \
     "$RUNS/calibrate-muscle-plain/renders" \
     "$RUNS/calibrate-muscle-variety/renders" "$RUNS/cylinder-renders" "$RUNS/muscle-renders" --check || true
@@ -95,12 +112,15 @@ $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/calibrate-m
     --set distribution="$RUNS/calibrate-muscle-distribution/renders" --set seed0="$RUNS/calibrate-muscle/renders" \
     --set seed3="$RUNS/calibrate-muscle-seed3/renders" --set cylinder_chip="$RUNS/cylinder-renders"
 $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/calibrate-muscle-length/two-sample" \
-    --set length="$RUNS/calibrate-muscle-length/renders" --set cylinder_chip="$RUNS/cylinder-renders"
-# which part of the chip tells them: the target band alone, then the floor alone
-for hide in floor target; do
+    --set length="$RUNS/calibrate-muscle-length/renders" --set kinds="$RUNS/calibrate-muscle-length/kinds-renders" \
+    --set kinds_start="$RUNS/calibrate-muscle-kinds/renders" --set cylinder_chip="$RUNS/cylinder-renders"
+# which part of the chip tells them: the target band alone, the floor alone, then the whole chip
+for hide in floor target none; do
     .venv/bin/python benchmarks/two_sample_seeds.py --real "$RUNS/split/validation/targets" --seeds 2 --hide $hide \
         "$RUNS/cylinder-renders" "$RUNS/calibrate-muscle-seed3/renders" "$RUNS/calibrate-muscle-distribution/renders" \
-        "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-length/renders"
+        "$RUNS/calibrate-muscle/renders" "$RUNS/calibrate-muscle-length/renders" \
+        "$RUNS/calibrate-muscle-length/kinds-renders" "$RUNS/calibrate-muscle-kinds/renders" \
+        "$RUNS/calibrate-muscle-length/placed-renders"
 done
 
 # one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)

@@ -5,8 +5,9 @@
 `sasmi calibrate` scales the start's targets but cannot add kinds: from `muscle_paper` (one cylinder) every render
 shows a cylinder. This writes the calibrated preset with the [[targets]] kinds of a second preset (`cylinder_chip`:
 cylinders, spheres, blocks, tyres, cones, boulders), every size times the ratio of the two chip sizes so that each
-kind keeps its size in pixels, and everything else as calibrated: renders of the two presets then differ by the
-kinds of target alone (docs/results.md, *Calibration*).
+kind keeps its size in pixels, placed where the calibrated preset places its first kind (its `x` and `y`), and
+everything else as calibrated: renders of the two presets then differ by the kinds of target alone
+(docs/results.md, *Calibration*).
 """
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ from pathlib import Path
 
 
 def with_kinds(calibrated: dict, kinds: dict) -> dict:
-    """`calibrated` with the [[targets]] kinds of `kinds`, scaled by the ratio of their chip sizes."""
+    """`calibrated` with the [[targets]] kinds of `kinds`, scaled by the ratio of their chip sizes and placed as
+    `calibrated`'s first kind."""
     from sasmi.realism.preset_space import apply, centre
     from sasmi.scene.preset import SECTIONS
 
@@ -27,7 +29,10 @@ def with_kinds(calibrated: dict, kinds: dict) -> dict:
 
     ratio = chip_size(calibrated) / chip_size(kinds)
     scaled = apply({"sonar": calibrated.get("sonar", {}), "targets": kinds["targets"]}, {"targets.size": ratio})
-    return {**calibrated, "targets_per_chip": kinds.get("targets_per_chip", 1), "targets": scaled["targets"]}
+    place = {key: value for key, value in calibrated.get("targets", [{}])[0].items() if key in ("x", "y")}
+    targets = [{**kind, **place} for kind in scaled["targets"]]
+    described = {"description": f"{calibrated.get('description', 'calibrated')}; targets of another preset's kinds"}
+    return {**calibrated, **described, "targets_per_chip": kinds.get("targets_per_chip", 1), "targets": targets}
 
 
 def main(argv: list[str] | None = None) -> int:

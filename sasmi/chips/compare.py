@@ -100,7 +100,7 @@ def _number(x: float, key: str) -> str:
         return f"{x:.0f}"
     if key == "bands":
         return f"{x:.3f}"
-    return f"{x:.1f}" if key in ("looks", "periodicity", "offset_track") else f"{x:.2f}"
+    return f"{x:.1f}" if key in ("looks", "periodicity", "offset_track", "offset_range") else f"{x:.2f}"
 
 
 def column_names(results: list[dict]) -> list[str]:

@@ -54,6 +54,9 @@ STATISTICS = {
     # real target chips are cut centred on the contact: renders spread along track land off them in φ
     # even when every other row matches (docs/matching.md)
     "offset_track": ("target offset along track from the centre row", "px"),
+    # and nearer than the centre along range (negative), so that the shadow falls in the chip: a preset places its
+    # targets in metres, so a larger chip draws them nearer its centre in pixels, where a classifier tells them
+    "offset_range": ("target offset along range from the centre column", "px"),
 }
 SWING_LAG = 3        # rows: past the speckle's correlation along track (real chips' 1-px acf about 0.2-0.35)
 SWING_TREND = 32.0   # rows: slower swings are the seabed's, not the gain's
@@ -190,7 +193,8 @@ def image_statistics(image01: np.ndarray, est: Estimator = Estimator()) -> dict[
         hr0, hc0, hr1, hc1 = target.highlight
         sr0, sc0, sr1, sc1 = target.shadow
         out.update(highlight_length=hc1 - hc0, highlight_width=hr1 - hr0, shadow_length=sc1 - sc0,
-                   shadow_width=sr1 - sr0, offset_track=abs((hr0 + hr1 - 1) / 2 - (h - 1) / 2))
+                   shadow_width=sr1 - sr0, offset_track=abs((hr0 + hr1 - 1) / 2 - (h - 1) / 2),
+                   offset_range=(hc0 + hc1 - 1) / 2 - (w - 1) / 2)
         level = floor_level(image01)
         cols = np.nonzero(target.shadow_pixels.any(axis=0))[0]
         out["shadow_floor"] = float(np.median(image01[target.shadow_pixels]) / np.mean(level[cols]))

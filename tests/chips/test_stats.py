@@ -73,13 +73,22 @@ def test_offset_along_track_is_the_highlight_rows_distance_from_the_centre_row()
     assert centred <= 1.0 and abs(above - 11) <= 1.5 and abs(below - 12) <= 1.5
 
 
+def test_offset_along_range_is_the_highlight_columns_signed_distance_from_the_centre_column():
+    rng = np.random.default_rng(5)
+    # a 6-column highlight whose first column is 58 spans columns 58-63, centred on 60.5: 3 px nearer than 63.5
+    near = image_statistics(target_chip(rng, at=(60, 58)))["offset_range"]
+    nearer = image_statistics(target_chip(rng, at=(60, 48)))["offset_range"]
+    farther = image_statistics(target_chip(rng, at=(60, 70)))["offset_range"]
+    assert abs(near + 3) <= 1.0 and abs(nearer + 13) <= 1.0 and abs(farther - 9) <= 1.0
+
+
 def test_no_target_means_nan_not_garbage():
     rng = np.random.default_rng(2)
     for image in (FLOOR * speckle(rng), target_chip(rng, left=True), target_chip(rng, at=(10, 10))):
         s = image_statistics(np.clip(image, 0, 1))
         assert find_target(image) is None
         assert all(math.isnan(s[k]) for k in ("shadow_length", "shadow_width", "highlight_length", "shadow_floor",
-                                                  "offset_track"))
+                                                  "offset_track", "offset_range"))
         assert math.isfinite(s["looks"]) and math.isfinite(s["p50"])
 
 

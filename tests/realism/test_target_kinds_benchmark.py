@@ -1,5 +1,5 @@
 """benchmarks/target_kinds.py: a calibrated preset with another preset's kinds of target, each at its size in
-pixels, everything else as calibrated."""
+pixels and placed as the calibrated preset's, everything else as calibrated."""
 from __future__ import annotations
 
 import importlib.util
@@ -32,6 +32,7 @@ def test_the_kinds_keep_their_size_in_pixels_and_the_rest_stays_calibrated(kinds
             if key in before:  # a quarter the metres on a quarter the chip
                 assert centre(after[key]) == pytest.approx(centre(before[key]) / 4, rel=1e-3), key
         assert after.get("weight") == before.get("weight")
+        assert (after["x"], after["y"]) == (calibrated["targets"][0]["x"], calibrated["targets"][0]["y"])
     for section in ("sonar", "seafloor", "post"):
         assert written[section] == calibrated[section]
 
