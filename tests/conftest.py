@@ -11,6 +11,16 @@ SHARED_CHIPS = REPO.parent / "shared" / "data" / "sonar-chips"
 FAILURES = REPO / "tests" / "_failures"
 
 
+def benchmark(name: str):
+    """benchmarks/NAME.py as a module, for tests of the figures' scripts."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def temporary_files(folder: Path) -> list[Path]:
     """The temporary files of sasmi.images.atomic_path left under `folder`: a clean failure leaves none."""
     return [p for p in folder.rglob("*") if p.name.startswith(".") and ".tmp" in p.name]

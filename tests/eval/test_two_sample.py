@@ -55,14 +55,9 @@ def test_chips_are_shrunk_by_area():
 
 def _seeds_benchmark():
     """benchmarks/two_sample_seeds.py as a module."""
-    import importlib.util
+    from conftest import benchmark
 
-    from conftest import REPO
-
-    spec = importlib.util.spec_from_file_location("two_sample_seeds", REPO / "benchmarks" / "two_sample_seeds.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
+    return benchmark("two_sample_seeds")
 
 
 def test_hiding_the_target_band_judges_the_floor_alone():

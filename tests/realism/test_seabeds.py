@@ -140,14 +140,11 @@ def test_speckle_grains_benchmark_tells_grains_from_a_shuffle_and_names_a_bad_fo
     """benchmarks/speckle_grains.py: a coherent speckle shows grains that a speckle of its grain and levels drawn
     from shuffled levels lacks; lone bright pixels are counted in the rows asked; an empty --real folder gets one
     line and exit 2."""
-    import importlib.util
     import sys
 
-    from conftest import REPO
+    from conftest import benchmark
 
-    spec = importlib.util.spec_from_file_location("speckle_grains", REPO / "benchmarks" / "speckle_grains.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = benchmark("speckle_grains")
     from sasmi.images import list_images
     from sasmi.preprocess import load_image
 

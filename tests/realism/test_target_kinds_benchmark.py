@@ -2,23 +2,17 @@
 pixels and placed as the calibrated preset's, everything else as calibrated."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
 from sasmi.realism.preset_space import centre
 from sasmi.scene.preset import load_preset
 
-REPO = Path(__file__).resolve().parents[2]
+from conftest import benchmark
 
 
 @pytest.fixture(scope="module")
 def kinds():
-    spec = importlib.util.spec_from_file_location("target_kinds", REPO / "benchmarks" / "target_kinds.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark("target_kinds")
 
 
 def test_the_kinds_keep_their_size_in_pixels_and_the_rest_stays_calibrated(kinds, tmp_path):

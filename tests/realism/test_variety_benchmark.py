@@ -2,21 +2,15 @@
 outside the directions' fit see it, as renders are."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from conftest import benchmark
 
 
 @pytest.fixture(scope="module")
 def variety():
-    spec = importlib.util.spec_from_file_location("calibrate_variety", REPO / "benchmarks" / "calibrate_variety.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark("calibrate_variety")
 
 
 def test_the_real_spread_is_what_chips_outside_the_fit_show(variety):
