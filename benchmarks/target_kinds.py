@@ -19,15 +19,9 @@ from pathlib import Path
 def with_kinds(calibrated: dict, kinds: dict) -> dict:
     """`calibrated` with the [[targets]] kinds of `kinds`, scaled by the ratio of their chip sizes and placed as
     `calibrated`'s first kind."""
-    from sasmi.realism.preset_space import apply, centre
-    from sasmi.scene.preset import SECTIONS
+    from sasmi.realism.preset_space import apply, centre, preset_value
 
-    default = SECTIONS["sonar"].__dataclass_fields__["chip_size"].default
-
-    def chip_size(raw: dict) -> float:
-        return centre(raw.get("sonar", {}).get("chip_size", default))
-
-    ratio = chip_size(calibrated) / chip_size(kinds)
+    ratio = centre(preset_value(calibrated, "sonar", "chip_size")) / centre(preset_value(kinds, "sonar", "chip_size"))
     scaled = apply({"sonar": calibrated.get("sonar", {}), "targets": kinds["targets"]}, {"targets.size": ratio})
     place = {key: value for key, value in calibrated.get("targets", [{}])[0].items() if key in ("x", "y")}
     targets = [{**kind, **place} for kind in scaled["targets"]]

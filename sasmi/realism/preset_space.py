@@ -155,7 +155,8 @@ def spread(value) -> float:
     return (max(args) - min(args)) / 2 / abs(c)
 
 
-def _field(raw: dict, section: str, key: str):
+def preset_value(raw: dict, section: str, key: str):
+    """The value of [section] key in preset `raw`, or its default."""
     return _value(raw.get(section, {}), f"{section}.{key}")
 
 
@@ -208,7 +209,7 @@ def explicit_geometry(raw: dict) -> dict:
     if centre(sonar.get("altitude", 0.0)) > 0:
         return raw
     raw = copy.deepcopy(raw)
-    raw.setdefault("sonar", {})["altitude"] = float(f"{_field(raw, 'sonar', 'max_range') / 10:.6g}")
+    raw.setdefault("sonar", {})["altitude"] = float(f"{preset_value(raw, 'sonar', 'max_range') / 10:.6g}")
     return raw
 
 
@@ -266,8 +267,8 @@ def apply(raw: dict, values: dict[str, float]) -> dict:
             table[field.split(".")[1]] = _with_centre_and_spread(value, c, values.get(f"{centre_name}.spread"),
                                                                  KNOBS[field])
     sonar = raw["sonar"]
-    far = max(_ends(_field(raw, "sonar", "near_range"))) + max(_ends(_field(raw, "sonar", "chip_size")))
-    if _field(raw, "sonar", "max_range") < far:
+    far = max(_ends(preset_value(raw, "sonar", "near_range"))) + max(_ends(preset_value(raw, "sonar", "chip_size")))
+    if preset_value(raw, "sonar", "max_range") < far:
         sonar["max_range"] = float(f"{far * 1.05:.4g}")
     return raw
 

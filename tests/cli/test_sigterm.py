@@ -19,7 +19,8 @@ def test_a_render_terminated_midway_says_so_and_its_rerun_completes_the_same_set
     process = subprocess.Popen([*command, "--out", str(tmp_path / "cut")], stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while not (tmp_path / "cut" / "labels").is_dir() or len(list((tmp_path / "cut" / "labels").iterdir())) < 20:
-        assert time.monotonic() < deadline and process.poll() is None
+        assert time.monotonic() < deadline, "fewer than 20 chips in 120 s"
+        assert process.poll() is None, process.communicate()[1]  # its stderr: why it stopped early
         time.sleep(0.1)
     process.send_signal(signal.SIGTERM)
     _, err = process.communicate(timeout=120)
