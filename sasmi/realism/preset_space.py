@@ -1,9 +1,10 @@
 """The knobs `sasmi calibrate` turns: a preset's fields as numbers a derivative-free search can move.
 
 A knob is a preset field ("post.gain") whose centre is searched over a physical range that holds any
-sonar's value, so every start preset lies inside it; `targets.size`, `targets.burial` and `targets.track_offset`
-are factors on every [[targets]] kind's sizes, burial depths or along-track positions (1 = the start), and
-`targets.length` on their lengths alone (cylinders', boxes'): with `targets.size` it sets their aspect.
+sonar's value, so every start preset lies inside it; `targets.size`, `targets.burial`, `targets.range_offset` and
+`targets.track_offset` are factors on every [[targets]] kind's sizes, burial depths, positions along range or along
+track (1 = the start), and `targets.length` on their lengths alone (cylinders', boxes'): with `targets.size` it sets
+their aspect. A moved chip size moves the targets' positions with it, so that they keep their place in the chip.
 "FIELD.spread" searches how widely the field is drawn around its centre: uniform over centre x (1 ± spread), 0
 being a fixed value. A knob left out keeps the start preset's value and spread. docs/calibrate.md lists them and
 why each range.
@@ -59,6 +60,9 @@ KNOBS: dict[str, Knob] = {
     # a factor on every kind's y: real target chips are cut centred on the contact, and a chip's pixel size moves
     # with sonar.chip_size, so a target's offset in pixels needs a knob of its own
     "targets.track_offset": Knob(0.02, 4.0, True),
+    # and on every kind's x: real target chips are cut with the contact nearer than the centre column, so that its
+    # shadow falls in the chip
+    "targets.range_offset": Knob(0.02, 4.0, True),
 }
 # searched only when named: what some seabeds show and others not at all. Sand ripples: stripes a few px apart that
 # neither φ nor the statistics see but a classifier tells from real MILCO chips at once (docs/calibrate.md), or sand
@@ -86,7 +90,7 @@ KIND = re.compile(r"seafloor\[(\d+)\]\.(.+)")  # "seafloor[1].ripple_amplitude":
 # burial scales with the sizes: a target x m keeps its share buried, so no draw buries it whole
 TARGET_SIZES = ("length", "radius", "width", "height", "tube_radius", "radius_top", "scale", "burial")
 TARGET_FIELDS = {"targets.size": TARGET_SIZES, "targets.burial": ("burial",), "targets.track_offset": ("y",),
-                 "targets.length": ("length",)}
+                 "targets.range_offset": ("x",), "targets.length": ("length",)}
 DEFAULT_KNOBS = (*(k for k in KNOBS if k not in NAMED_ONLY), "post.gain.spread", "seafloor.albedo.spread",
                  "sonar.altitude.spread")
 
@@ -240,17 +244,23 @@ def _scaled(value, factor: float, whole: bool = False):
     return {kind: [_rounded(a * factor, whole) for a in args]}
 
 
+def _scale_targets(raw: dict, keys: tuple[str, ...], factor: float) -> None:
+    """Every [[targets]] kind's (and a target grid's target's) `keys` times `factor`, in place."""
+    for table in [*raw.get("targets", []), raw.get("target_grid", {}).get("target", {})]:
+        for key in keys:
+            if key in table:  # a size left out keeps its default: it may not apply to the shape
+                table[key] = _scaled(table[key], factor)
+
+
 def apply(raw: dict, values: dict[str, float]) -> dict:
-    """A copy of preset `raw` with every knob set; max_range grows when the chip would leave it."""
+    """A copy of preset `raw` with every knob set; max_range grows when the chip would leave it, and the targets'
+    positions scale with the chip size: real chips are cut around their contacts in pixels, and a position left in
+    metres would tie the targets' place in the chip to the pixel size."""
+    start_chip = centre(preset_value(raw, "sonar", "chip_size"))
     raw = copy.deepcopy(explicit_geometry(raw))
     for name, v in values.items():
         if name.startswith("targets."):
-            keys = TARGET_FIELDS[name]
-            tables = [*raw.get("targets", []), raw.get("target_grid", {}).get("target", {})]
-            for table in tables:
-                for key in keys:
-                    if key in table:  # a size left out keeps its default: it may not apply to the shape
-                        table[key] = _scaled(table[key], v)
+            _scale_targets(raw, TARGET_FIELDS[name], v)
             continue
         field = kind_of(name)[0]
         if field == "seafloor.weight":
@@ -266,6 +276,9 @@ def apply(raw: dict, values: dict[str, float]) -> dict:
             c = values[centre_name] if centre_name in values else centre(value)
             table[field.split(".")[1]] = _with_centre_and_spread(value, c, values.get(f"{centre_name}.spread"),
                                                                  KNOBS[field])
+    chip_ratio = centre(preset_value(raw, "sonar", "chip_size")) / start_chip
+    if chip_ratio != 1:
+        _scale_targets(raw, ("x", "y"), chip_ratio)
     sonar = raw["sonar"]
     far = max(_ends(preset_value(raw, "sonar", "near_range"))) + max(_ends(preset_value(raw, "sonar", "chip_size")))
     if preset_value(raw, "sonar", "max_range") < far:

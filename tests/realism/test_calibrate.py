@@ -76,6 +76,17 @@ def test_the_length_knob_scales_lengths_alone_on_top_of_the_size():
     assert lengths >= 2  # the cylinders and boxes at least
 
 
+def test_targets_keep_their_place_in_a_moved_chip_and_the_range_offset_moves_them_along_range_alone():
+    raw = load_preset("muscle_paper").raw  # a 6 m chip, targets -1 to 0 m along range, -0.8 to 0.8 m along track
+    grown = apply(raw, {"sonar.chip_size": 24.0})
+    assert grown["targets"][0]["x"] == {"uniform": [-4.0, 0.0]} and grown["targets"][0]["y"] == {"uniform": [-3.2, 3.2]}
+    nearer = apply(raw, {"targets.range_offset": 2.0})
+    assert nearer["targets"][0]["x"] == {"uniform": [-2.0, 0.0]} and nearer["targets"][0]["y"] == raw["targets"][0]["y"]
+    both = apply(raw, {"sonar.chip_size": 24.0, "targets.range_offset": 0.5, "targets.track_offset": 0.25})
+    assert both["targets"][0]["x"] == {"uniform": [-2.0, 0.0]} and both["targets"][0]["y"] == {"uniform": [-0.8, 0.8]}
+    Preset.from_dict(both)
+
+
 def test_altitude_is_written_out_before_the_range_moves():
     raw = load_preset("muscle_paper").raw  # no altitude: max_range / 10 = 6 m
     moved = apply(raw, {"sonar.chip_size": 40.0})
@@ -283,21 +294,24 @@ def distances_to_renders_of(truth: str, variants: dict[str, str], tmp_path, part
     return real, {name: s if part is None else s[part] for name, s in scores.items()}
 
 
-def test_the_objective_charges_targets_off_the_centre_row_a_missing_gain_swing_and_a_speckle_that_never_wanders(
+def test_the_objective_charges_targets_off_their_place_a_missing_gain_swing_and_a_speckle_that_never_wanders(
         tmp_path):
-    """Real chips with centred targets, a gain swing and a speckle grainier in some patches: new draws of their preset
-    match all three; the same preset with its targets spread ±2 m along track misses the offset alone, without the
-    swing the swing alone, and without the wander the wander alone."""
-    truth = PRESET.replace("GAIN", "0.3") + "gain_swing = 0.15\nspeckle_wander = 0.3\n"
+    """Real chips with centred targets a metre nearer than the centre column, a gain swing and a speckle grainier in
+    some patches: new draws of their preset match all four; the same preset with its targets spread ±2 m along track
+    misses the offset along track alone, with its targets at the centre column the offset along range alone, without
+    the swing the swing alone, and without the wander the wander alone."""
+    truth = PRESET.replace("GAIN", "0.3").replace("x = {uniform = [-1.5, 0.0]}", "x = {uniform = [-1.1, -0.9]}") \
+        + "gain_swing = 0.15\nspeckle_wander = 0.3\n"
     variants = {"truth": truth, "off_centre": truth.replace('shape = "cylinder"', 'shape = "cylinder"\ny = {uniform = '
                                                                                   '[-2.0, 2.0]}'),
+                "at_centre": truth.replace("x = {uniform = [-1.1, -0.9]}", "x = {uniform = [-0.1, 0.1]}"),
                 "no_swing": truth.replace("gain_swing = 0.15", "gain_swing = 0.0"),
                 "no_wander": truth.replace("speckle_wander = 0.3", "speckle_wander = 0.0")}
     real, distances = distances_to_renders_of(truth, variants, tmp_path)
-    parts = ("offset_track", "bands", "wander")
+    parts = ("offset_track", "offset_range", "bands", "wander")
     assert set(parts) <= set(real.checked)
-    for name, missed in (("truth", None), ("off_centre", "offset_track"), ("no_swing", "bands"),
-                         ("no_wander", "wander")):
+    for name, missed in (("truth", None), ("off_centre", "offset_track"), ("at_centre", "offset_range"),
+                         ("no_swing", "bands"), ("no_wander", "wander")):
         for part in parts:
             assert (distances[name][part] > 1.5) if part == missed else (distances[name][part] <= 1), (name, distances)
 
