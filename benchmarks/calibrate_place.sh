@@ -28,16 +28,13 @@ $SASMI stats "$RUNS/split/validation/targets" "$RUNS/place-muscle/renders" "$RUN
 $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$RUNS/place-muscle/two-sample" \
     --set muscle="$RUNS/place-muscle/renders" --set default="$RUNS/place-default/renders" \
     --set cylinder_chip="$RUNS/cylinder-renders"
-# which part of the chip tells them: the target band alone, the floor alone, then the whole chip
-for hide in floor target none; do
-    .venv/bin/python benchmarks/two_sample_seeds.py --real "$RUNS/split/validation/targets" --seeds 2 --hide $hide \
-        "$RUNS/cylinder-renders" "$RUNS/place-muscle/renders" "$RUNS/place-default/renders"
-done
-# the place's spread: the target band and the whole chip with the targets drawn as narrowly as the real ones
+# the place's spread: the muscle_paper search's preset with its targets drawn as narrowly as the real ones
 sed 's/^x = {uniform = \[-1.856, 0.0\]}/x = {uniform = [-1.18, -0.68]}/' "$RUNS/place-muscle/preset.toml" \
     > "$RUNS/place-muscle/narrow.toml"
 $SASMI render "$RUNS/place-muscle/narrow.toml" --count 400 --size 128 --out "$RUNS/place-muscle/narrow-renders"
-for hide in floor none; do
+# which part of the chip tells them: the target band alone, the floor alone, then the whole chip
+for hide in floor target none; do
     .venv/bin/python benchmarks/two_sample_seeds.py --real "$RUNS/split/validation/targets" --seeds 2 --hide $hide \
-        "$RUNS/cylinder-renders" "$RUNS/place-muscle/renders" "$RUNS/place-muscle/narrow-renders"
+        "$RUNS/cylinder-renders" "$RUNS/place-muscle/renders" "$RUNS/place-default/renders" \
+        "$RUNS/place-muscle/narrow-renders"
 done
