@@ -1,5 +1,7 @@
 #!/bin/sh
-# The figures of docs/results.md, *The targets' place along range*: `sasmi calibrate` as it stands (its objective
+# The figures of docs/results.md, *The targets' place along range*, measured at commit 9bdeb39 (`git checkout
+# 9bdeb39`, then this script), whose default knobs searched the rocks' size (benchmarks/calibrate_rocks.sh measures
+# the command as it stands): `sasmi calibrate` there (its objective
 # matching the target's offset along range on target chips, `targets.range_offset` among the default knobs, the
 # targets' positions moving with the chip size) from muscle_paper (the paper's 6 m chip) and from the default start
 # (cylinder_chip) to the MILCO train targets of the seed-0 split; 400 renders of each against the validation targets
