@@ -78,8 +78,8 @@ NAMED_ONLY = {
     "seafloor.mosaic_contrast": Knob(0.1, 10.0, True),  # 1: one sediment; darker or brighter second ones alike
     "seafloor.mosaic_share": Knob(0.0, 1.0, False, 1.0),
     "seafloor.mosaic_size": Knob(0.5, 30.0, True),
-    # the rocks' size, which no statistic pins: searched by default, the rocks shrank to a pixel across, where a
-    # classifier tells the floor at once, so a search keeps the start's sizes unless named (docs/calibrate.md)
+    # the rocks' size, which no statistic pins: searched by default, the rocks shrank to a pixel or two across, where a
+    # classifier tells the floor, so a search keeps the start's sizes unless named (docs/calibrate.md)
     "seafloor.rock_radius": Knob(0.03, 1.0, True),
     # a factor on every kind's length alone: targets.size scales a target whole, so a search cannot lengthen a shadow
     # along range (height) without widening it along track (length); real MILCO shadows are long and narrow
