@@ -4,8 +4,8 @@
 # Part 2 is measured as the script stands. The first seven calibrations of part 1 and the first of part 3 are
 # measured at commit bdd7bd9 (the first of part 3 also at commit 8133069, whose objective did not match the seabed's
 # contrast), whose objective did not match the target's offset along range and whose searches left the targets'
-# positions in metres as the chip size moved (benchmarks/calibrate_place.sh measures it at 9bdeb39, and
-# benchmarks/calibrate_rocks.sh as it stands); the
+# positions in metres as the chip size moved (benchmarks/calibrate_place.sh measures the first of parts 1 and 3 at
+# 9bdeb39, and benchmarks/calibrate_rocks.sh as it stands); the
 # others at commit 80abb38, whose objective
 # did not match the wander, the target's offset along track and the gain's swing, whose default knobs lacked
 # targets.track_offset and whose FLOOR_KNOBS lacked post.gain_swing: the script there gives their figures.

@@ -1,0 +1,73 @@
+"""Two `sasmi atr-bench` runs on the same real chips, paired seed by seed: each arm's (real chips per class, way)
+mean ROC AUC in each run, and the second run's difference from the first in ROC AUC and Pd, with its 95 % interval
+(Student's t over the seeds both ran). A seed draws the same real chips and initialises the same network in every
+run of the bench, so the difference is the synthetic chips' alone (the `real` arms differ by exactly 0).
+
+    python benchmarks/atr_paired.py RUN_A/bench RUN_B/bench
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+
+def runs(folder: Path) -> dict[tuple[str, str, int], dict]:
+    """{(real per class, way, seed): run} from FOLDER/runs.jsonl, whose first line holds the bench's settings."""
+    lines = (folder / "runs.jsonl").read_text().splitlines()
+    rows = [json.loads(line) for line in lines[1:] if line.strip()]
+    return {(r["n"], r["way"], r["seed"]): r for r in rows}
+
+
+def interval(values: np.ndarray) -> tuple[float, float, float]:
+    """Mean and 95 % interval (Student's t)."""
+    half = stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values))
+    return float(values.mean()), float(values.mean() - half), float(values.mean() + half)
+
+
+def paired(first: dict, second: dict) -> list[dict]:
+    """Per (real per class, way) both runs hold for 2 seeds or more: the two mean AUCs and the second's differences."""
+    out = []
+    for n, way in dict.fromkeys((n, way) for n, way, _ in first):
+        seeds = sorted(s for k, w, s in first if (k, w) == (n, way) and (n, way, s) in second)
+        if len(seeds) < 2:
+            continue
+        a, b = ([run[(n, way, s)] for s in seeds] for run in (first, second))
+        difference = {m: interval(np.array([y[m] - x[m] for x, y in zip(a, b)])) for m in ("auc", "pd")}
+        out.append({"n": n, "way": way, "seeds": len(seeds), "auc_first": float(np.mean([x["auc"] for x in a])),
+                    "auc_second": float(np.mean([y["auc"] for y in b])), **{f"d_{m}": d for m, d in difference.items()}})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("first", type=Path, help="an atr-bench --out folder")
+    parser.add_argument("second", type=Path, help="another, on the same real chips")
+    args = parser.parse_args(argv)
+    try:
+        rows = paired(runs(args.first), runs(args.second))
+    except OSError as e:
+        print(f"atr_paired: error: {e.filename}: {e.strerror}", file=sys.stderr)
+        return 2
+    except (ValueError, KeyError) as e:
+        print(f"atr_paired: error: {args.first} or {args.second}: not runs.jsonl of `sasmi atr-bench` ({e})",
+              file=sys.stderr)
+        return 2
+    if not rows:
+        print(f"atr_paired: error: {args.first} and {args.second} share no arm of 2 seeds or more", file=sys.stderr)
+        return 2
+    print(f"| real chips per class | way | seeds | ROC AUC, {args.first} | {args.second} | Δ ROC AUC | Δ Pd |")
+    print("|---|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        d = {m: "{:+.3f} [{:+.3f}, {:+.3f}]".format(*r[f"d_{m}"]) for m in ("auc", "pd")}
+        print(f"| {r['n']} | {r['way']} | {r['seeds']} | {r['auc_first']:.3f} | {r['auc_second']:.3f} | {d['auc']} "
+              f"| {d['pd']} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
