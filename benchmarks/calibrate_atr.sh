@@ -3,7 +3,8 @@
 # ATR better than its start's? For each PRESET (a name in scenes/ or a TOML file; a calibration's RUN/preset.toml),
 # 400 target chips and 400 negatives of the same preset with its targets and companions left out (its own floors,
 # so that "rendered floor" tells no class), then `sasmi atr-bench` on the seed-0 split: no, 10 and 40 real chips
-# per class, the ways `real`, `alone` and `pretrain`, 10 seeds. Rerunning continues.
+# per class, the ways `real`, `alone` and `pretrain` (NAME/bench), then `mixed` and `replay` at 10 and 40
+# (NAME/bench-mixed), 10 seeds each. Rerunning continues.
 #
 #     benchmarks/calibrate_atr.sh RUNS PRESET...
 #     e.g. benchmarks/calibrate_atr.sh runs cylinder_chip muscle_paper runs/rocks-muscle/preset.toml
@@ -27,4 +28,7 @@ for preset in "$@"; do
     $SASMI atr-bench --real-train "$RUNS/split/train" --real-test "$RUNS/split/validation" \
         --synthetic "$out/targets" --synthetic-negatives "$out/floors" \
         --ways real alone pretrain --real-per-class 0 10 40 --out "$out/bench"
+    $SASMI atr-bench --real-train "$RUNS/split/train" --real-test "$RUNS/split/validation" \
+        --synthetic "$out/targets" --synthetic-negatives "$out/floors" \
+        --ways real mixed replay --real-per-class 10 40 --out "$out/bench-mixed"
 done
