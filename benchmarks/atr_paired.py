@@ -38,7 +38,8 @@ def paired(first: dict, second: dict) -> list[dict]:
             continue
         a, b = ([run[(n, way, s)] for s in seeds] for run in (first, second))
         difference = {m: interval(np.array([y[m] - x[m] for x, y in zip(a, b)])) for m in ("auc", "pd")}
-        means = {"auc_first": float(np.mean([x["auc"] for x in a])), "auc_second": float(np.mean([y["auc"] for y in b]))}
+        means = {"auc_first": float(np.mean([x["auc"] for x in a])),
+                 "auc_second": float(np.mean([y["auc"] for y in b]))}
         out.append({"n": n, "way": way, "seeds": len(seeds), **means, **{f"d_{m}": d for m, d in difference.items()}})
     return out
 
