@@ -8,25 +8,24 @@ run of the bench, so the difference is the synthetic chips' alone (the `real` ar
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
+
+from sasmi.atr.bench import read_runs
+from sasmi.atr.summary import interval
 
 
 def runs(folder: Path) -> dict[tuple[str, str, int], dict]:
-    """{(real per class, way, seed): run} from FOLDER/runs.jsonl, whose first line holds the bench's settings."""
-    lines = (folder / "runs.jsonl").read_text().splitlines()
-    rows = [json.loads(line) for line in lines[1:] if line.strip()]
-    return {(r["n"], r["way"], r["seed"]): r for r in rows}
+    """{(real per class, way, seed): run} of the bench in FOLDER."""
+    return read_runs(folder / "runs.jsonl")[1]
 
 
-def interval(values: np.ndarray) -> tuple[float, float, float]:
-    """Mean and 95 % interval (Student's t)."""
-    half = stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values))
-    return float(values.mean()), float(values.mean() - half), float(values.mean() + half)
+def _mean_and_interval(values: list[float]) -> tuple[float, float, float]:
+    """Mean and its 95 % interval (Student's t over the seeds, as the bench's own tables)."""
+    m = interval(values)
+    return m["mean"], m["mean"] - m["ci95"], m["mean"] + m["ci95"]
 
 
 def paired(first: dict, second: dict) -> list[dict]:
@@ -37,7 +36,7 @@ def paired(first: dict, second: dict) -> list[dict]:
         if len(seeds) < 2:
             continue
         a, b = ([run[(n, way, s)] for s in seeds] for run in (first, second))
-        difference = {m: interval(np.array([y[m] - x[m] for x, y in zip(a, b)])) for m in ("auc", "pd")}
+        difference = {m: _mean_and_interval([y[m] - x[m] for x, y in zip(a, b)]) for m in ("auc", "pd")}
         means = {"auc_first": float(np.mean([x["auc"] for x in a])),
                  "auc_second": float(np.mean([y["auc"] for y in b]))}
         out.append({"n": n, "way": way, "seeds": len(seeds), **means, **{f"d_{m}": d for m, d in difference.items()}})
@@ -54,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:
         print(f"atr_paired: error: {e.filename}: {e.strerror}", file=sys.stderr)
         return 2
-    except (ValueError, KeyError) as e:
+    except KeyError as e:
         print(f"atr_paired: error: {args.first} or {args.second}: not runs.jsonl of `sasmi atr-bench` ({e})",
               file=sys.stderr)
         return 2

@@ -143,22 +143,29 @@ def _settings(cfg: AtrConfig) -> dict:
     return json.loads(json.dumps({k: v for k, v in asdict(cfg).items() if k not in ("seeds", "real_per_class", "ways")}))
 
 
-def _done_runs(path: Path, cfg: AtrConfig, inputs: dict) -> dict[tuple[str, str, int], dict]:
-    """Runs of an earlier call with the same settings; a RUN made with others is refused."""
-    if not path.is_file():
-        return {}
+def read_runs(path: Path) -> tuple[dict, dict[tuple[str, str, int], dict]]:
+    """RUN/runs.jsonl: its first line (the bench's settings and inputs; {} for an empty file) and its runs by
+    (real chips per class, way, seed)."""
     lines = []
     for line in path.read_text().splitlines():
         try:
             lines.append(json.loads(line))
         except json.JSONDecodeError:
             continue  # a line cut short by a kill: that run is trained again
-    if not lines:
+    head, *rows = lines or [{}]
+    return head, {(r["n"], r["way"], r["seed"]): r for r in rows}
+
+
+def _done_runs(path: Path, cfg: AtrConfig, inputs: dict) -> dict[tuple[str, str, int], dict]:
+    """Runs of an earlier call with the same settings; a RUN made with others is refused."""
+    if not path.is_file():
         return {}
-    head, *rows = lines
+    head, runs = read_runs(path)
+    if not head:
+        return {}
     if head.get("settings") != _settings(cfg) or head.get("inputs") != inputs:
         raise SasmiError(f"--out {path.parent}: holds a bench of other settings or inputs; choose another --out")
-    return {(r["n"], r["way"], r["seed"]): r for r in rows}
+    return runs
 
 
 def atr_bench(real_train, real_test, synthetic, out, cfg: AtrConfig = AtrConfig(),

@@ -14,7 +14,7 @@ METRICS = ("accuracy", "auc", "pd")
 NAMES = {"accuracy": "accuracy", "auc": "ROC AUC", "pd": "Pd at the false-alarm rate"}
 
 
-def _interval(values: list[float]) -> dict:
+def interval(values: list[float]) -> dict:
     from scipy import stats
 
     v = np.asarray(values, dtype=float)
@@ -29,7 +29,7 @@ def summarise(rows: list[dict]) -> dict:
         out[n] = {}
         for way in dict.fromkeys(r["way"] for r in rows if r["n"] == n):
             runs = sorted((r for r in rows if r["n"] == n and r["way"] == way), key=lambda r: r["seed"])
-            out[n][way] = {m: _interval([r[m] for r in runs]) for m in METRICS}
+            out[n][way] = {m: interval([r[m] for r in runs]) for m in METRICS}
     return out
 
 
@@ -53,7 +53,7 @@ def paired(rows: list[dict], ns: list[str], yardstick: int) -> list[dict]:
             seeds = sorted(s for (k, w, s) in by if k == n and w == way and (against, "real", s) in by)
             if not seeds:
                 continue
-            diffs = {m: _interval([by[(n, way, s)][m] - by[(against, "real", s)][m] for s in seeds]) for m in METRICS}
+            diffs = {m: interval([by[(n, way, s)][m] - by[(against, "real", s)][m] for s in seeds]) for m in METRICS}
             out.append({"n": n, "way": way, "against": f"real at {against}", "seeds": len(seeds), **diffs})
     return out
 
