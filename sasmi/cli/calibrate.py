@@ -36,6 +36,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=d.size, help=f"render and statistics size (default: {d.size})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per pixel (default: {d.spp})")
     p.add_argument("--sampler", choices=SAMPLERS, default=d.sampler, help=f"Optuna sampler (default: {d.sampler})")
+    p.add_argument("--searches", type=int, default=d.searches, metavar="N",
+                   help="searches from the start, each its own sampler path over the same scenes, that race over the "
+                        "first half of --minutes; the lowest then continues alone "
+                        f"(default: {d.searches}; 1: one search all along)")
     p.add_argument("--workers", type=int, default=1,
                    help="local Dask processes scoring trials side by side (default: 1, here one after another)")
     p.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
@@ -70,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.realism.preset_space import named_knobs
 
     cfg = CalibrateConfig(params=named_knobs(args.params), minutes=args.minutes, trials=args.trials, chips=args.chips,
-                          size=args.size, spp=args.spp, sampler=args.sampler, seed=args.seed,
+                          size=args.size, spp=args.spp, sampler=args.sampler, searches=args.searches, seed=args.seed,
                           variety_weight=args.variety_weight, distribution_weight=args.distribution_weight,
                           spread_correction=not args.plain_fid,
                           workers=args.workers, scheduler=args.scheduler,

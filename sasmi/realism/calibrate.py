@@ -19,8 +19,9 @@ distribution of looks; the third (off by default) each statistic's distribution,
 tolerance leaves free and a classifier sees (the checked statistics and the nine of `sasmi evaluate`'s signature: each
 one's ROC AUC, renders against real chips, over two standard errors of an AUC of one distribution); the fourth (off by
 default) keeps them as varied as the real chips, which the φ-FID of a few renders does not (docs/calibrate.md says
-what each did). Optuna's CMA-ES (or TPE) searches; the study lives in RUN/study.db, so a rerun continues it;
---minutes counts the search time of all runs together.
+what each did). Optuna's CMA-ES (or TPE) searches: --searches of them race over the first half of the time and the
+lowest continues alone (sasmi/realism/calibration_study.py); the studies live in RUN/study.db, so a rerun continues
+them; --minutes counts the search time of all searches and runs together.
 """
 from __future__ import annotations
 
@@ -38,7 +39,8 @@ from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
 from sasmi.realism.calibration_objective import RealChips, Weights, final_score, real_chips, score
-from sasmi.realism.calibration_study import asked, calibrated_trial, full_disk_named, open_study, run_batch
+from sasmi.realism.calibration_study import (asked, calibrated_trial, full_disk_named, leader, lowest, next_search,
+                                             open_studies, run_batch, searched_seconds)
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
 
@@ -60,6 +62,9 @@ class CalibrateConfig:
     size: int = 128  # render size and statistics size (the statistics' thresholds are stated at 128 px)
     spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
+    # searches racing over the first half of the time, each its own sampler path over the same scenes; the lowest
+    # then continues alone (1: one search all along)
+    searches: int = 2
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     # weight of the statistics' AUCs, chip by chip: what keeps most renders from lying on one side of most real chips
     # (off by default: from muscle_paper it cost the φ-FID ratio, and a classifier told the renders as well)
@@ -88,6 +93,8 @@ class CalibrateConfig:
                              ("--distribution-weight", self.distribution_weight)):
             if not weight >= 0:
                 raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
+        if self.searches < 1:
+            raise SasmiError(f"--searches: {self.searches} (allowed: >= 1)")
         if self.contenders < 1:
             raise SasmiError(f"--contenders: {self.contenders} (allowed: >= 1)")
         if self.profile_trials < 0:
@@ -198,7 +205,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
     from sasmi.gan.loop import StopSignals
     from sasmi.images import FolderLock
     from sasmi.realism.calibration_pins import what_the_chips_pin
-    from sasmi.realism.calibration_report import searched_seconds, write_report
+    from sasmi.realism.calibration_report import write_report
 
     cfg = cfg.validate()
     out = Path(out)
@@ -217,29 +224,31 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                                                              "statistics": list(real.checked),
                                                              "found_tolerance": real.tolerances["targets_found"].high}}
         _check_record(out, record)
-        study = open_study(out, cfg, x0)
+        studies = open_studies(out, cfg, x0)
         stop = StopSignals()
         budget = cfg.minutes * 60
         with trial_runner(cfg, preset, real, encoder, phi) as (run, width), \
                 tqdm(total=round(budget), unit="s", desc="calibrate", disable=not progress or None) as bar:
             with full_disk_named(out):
-                run_batch(study, preset, cfg, x0, run, 0)  # the trials a killed run asked: scored as asked
+                for search, study in enumerate(studies):  # the trials a killed run asked: scored as asked
+                    run_batch(study, search, preset, cfg, x0, run, 0)
             while True:
-                spent, done = searched_seconds(study), asked(study)
+                spent, done = searched_seconds(studies), sum(asked(s) for s in studies)
                 bar.n = min(round(spent), round(budget))
                 # best_value reads the best trial alone; best_trials reads every trial, about a second a batch once
                 # the study holds thousands, outside the search time counted
-                with contextlib.suppress(ValueError):  # none told yet
-                    bar.set_postfix(trials=done, best=f"{study.best_value:.3g}")
+                bar.set_postfix(trials=done, best=f"{min(lowest(s) for s in studies):.3g}")
                 bar.refresh()
-                if spent >= budget or (cfg.trials is not None and done >= cfg.trials):
+                search = next_search(studies, cfg)
+                if search is None:
                     break
                 if stop.signal:
-                    raise Stopped(stop.signal, f"stopped after trial {done - 1}; rerun the same command to "
+                    raise Stopped(stop.signal, f"stopped after {done} trials; rerun the same command to "
                                                f"continue ({out}/study.db keeps every trial)")
                 with full_disk_named(out):
                     width_now = width if cfg.trials is None else min(width, cfg.trials - done)
-                    run_batch(study, preset, cfg, x0, run, width_now)
+                    run_batch(studies[search], search, preset, cfg, x0, run, width_now)
+            study = studies[leader(studies)]
             stop.restore()
             bar.close()
             final = replace(cfg, seed=cfg.seed + 1)
@@ -264,7 +273,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
         if cfg.refine_steps:
             best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
                                                                 shown["calibrated"], progress)
-        write_report(out, record, cfg, preset, best_raw, real, study, shown, pins, together, refinement)
+        write_report(out, record, cfg, preset, best_raw, real, studies, shown, pins, together, refinement)
     finally:
         lock.release()
     return out

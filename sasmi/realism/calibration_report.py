@@ -16,16 +16,12 @@ from sasmi.chips.compare import TOLERANCES
 from sasmi.chips.stats import STATISTICS
 from sasmi.images import write_text
 from sasmi.realism.calibration_pins import PARTNER, RISE, SPAN, STEP, best_tenth, pairs
+from sasmi.realism.calibration_study import leader, lowest, searched_seconds
 from sasmi.realism.preset_space import knob, start_values
 
 SHOWN = 6  # chips per column of the sheet
 PARTNERS = 3  # knobs named in a row's *moves with*
 VERDICTS = {True: "yes", False: "**no**", None: "cannot tell"}  # what the chips pin, as the tables say it
-
-
-def searched_seconds(study) -> float:
-    """Wall time of the search, all runs together: what --minutes counts."""
-    return float(study.user_attrs.get("seconds", 0.0))
 
 
 def _number(v: float) -> str:
@@ -167,26 +163,33 @@ def distribution_table(real, shown: dict) -> list[str]:
     return lines
 
 
-def objective_figure(study, path: Path) -> None:
+def objective_figure(studies: list, chosen: int, path: Path) -> None:
+    """The objective over the search: every trial, and each search's best so far; the statistics the chosen
+    search's best trial so far passes."""
     from matplotlib.figure import Figure
 
     from sasmi.eval.report import save_figure
 
-    done = [t for t in study.trials if t.value is not None and t.datetime_complete is not None]
-    t0 = study.trials[0].datetime_start
-    minutes = np.array([(t.datetime_complete - t0).total_seconds() / 60 for t in done])
-    values = np.array([t.value for t in done])
+    t0 = min(s.trials[0].datetime_start for s in studies if s.trials and s.trials[0].datetime_start)
     fig = Figure(figsize=(9, 3.5))
     ax, ax_pass = fig.subplots(1, 2)
-    ax.scatter(minutes, values, s=6, color="0.6", label="trial")
-    ax.plot(minutes, np.minimum.accumulate(values), color="C0", label="best so far")
+    for search, study in enumerate(studies):
+        done = [t for t in study.trials if t.value is not None and t.datetime_complete is not None]
+        if not done:
+            continue
+        minutes = np.array([(t.datetime_complete - t0).total_seconds() / 60 for t in done])
+        values = np.array([t.value for t in done])
+        ax.scatter(minutes, values, s=6, color="0.6", label="trial" if search == 0 else None)
+        name = "best so far" if len(studies) == 1 else f"search {search}" + (", continued" if search == chosen else "")
+        ax.plot(minutes, np.minimum.accumulate(values), color=f"C{search}", label=name)
+        if search == chosen:
+            chosen_minutes, passes, best = minutes, [], 0
+            for i, value in enumerate(values):  # the statistics passed by the best trial so far
+                best = i if value < values[best] else best
+                passes.append(done[best].user_attrs.get("passed", 0))
     ax.set(xlabel="minutes since the first trial", ylabel="objective", yscale="log", title="objective")
     ax.legend()
-    passes, best = [], 0
-    for i, value in enumerate(values):  # the statistics passed by the best trial so far
-        best = i if value < values[best] else best
-        passes.append(done[best].user_attrs.get("passed", 0))
-    ax_pass.step(minutes, passes, where="post")
+    ax_pass.step(chosen_minutes, passes, where="post")
     ax_pass.set(xlabel="minutes since the first trial", ylabel="statistics",
                 title="best trial: statistics within tolerance", ylim=(0, len(TOLERANCES) + 0.5))
     fig.tight_layout()
@@ -262,16 +265,29 @@ def sheet_figure(real, shown: dict, path: Path) -> None:
     save_figure(fig, path)
 
 
-def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, study, shown: dict,
+def search_lines(studies: list, chosen: int) -> list[str]:
+    """How the searches raced: each one's trials and best, and which continued."""
+    if len(studies) == 1:
+        return []
+    cells = ", ".join(f"search {i} {len(s.trials)} trials in {searched_seconds([s]) / 60:.1f} minutes, best "
+                      f"{lowest(s):.3g}" for i, s in enumerate(studies))
+    return [f"{len(studies)} searches from the start, each its own sampler path over the same scenes, raced over "
+            f"the first half of the search time; search {chosen}, the lowest when the race ended, continued alone "
+            f"({cells}). What follows is search {chosen}'s.", ""]
+
+
+def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, studies: list, shown: dict,
                  pins: dict[str, dict], together: dict[str, dict], refinement: dict | None = None) -> None:
     import json
 
+    chosen = leader(studies)
+    study = studies[chosen]
     best = study.trials[study.user_attrs["calibrated_trial"]]
     draws, contenders = study.user_attrs["contenders"]["draws"], study.user_attrs["contenders"]["scores"]
     write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
     write_text(out / "together.json", json.dumps(together, indent=2, ensure_ascii=False) + "\n")
     write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params, refinement))
-    objective_figure(study, out / "objective.png")
+    objective_figure(studies, chosen, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
     trials = [(t.value, t.params) for t in study.trials if t.value is not None]
     ridges = ridges_figure(pins, trials, best.params, out / "ridges.png", together)
@@ -281,7 +297,8 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     pr = {n: f"{s['precision']:.2f} / {s['recall']:.2f}" for n, (_, s) in shown.items()}
     lines = [
         f"# Calibration of {Path(record['start']).name} to {record['real']}", "",
-        f"{len(study.trials)} trials in {searched_seconds(study) / 60:.1f} minutes of search ({cfg.sampler}, "
+        *search_lines(studies, chosen),
+        f"{len(study.trials)} trials in {searched_seconds([study]) / 60:.1f} minutes of search ({cfg.sampler}, "
         f"{cfg.chips} renders of {cfg.size}² px per trial); objective {study.trials[0].value:.3g} at the start, "
         f"{study.best_value:.3g} at the best (trial {study.best_trial.number}). Calibrated: trial {best.number} "
         f"({best.value:.3g}), of the {len(contenders)} best the one scoring lowest on {draws} other draws of "

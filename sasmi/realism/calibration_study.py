@@ -1,12 +1,16 @@
-"""`sasmi calibrate`'s search: its Optuna study in RUN/study.db, asked and told in batches, resumed exactly.
+"""`sasmi calibrate`'s search: its Optuna studies in RUN/study.db, asked and told in batches, resumed exactly.
 
-A rerun asks what an unbroken run asks: each trial's sampler is seeded by the study's seed and the trial's
-number (CMA-ES keeps its state in the study, not in the sampler), and the trials a killed run had asked
-are scored as they were asked.
+With --searches N, N studies (each its own sampler path from the start, over the same scenes) race: each runs for
+its share of the first half of the search time, then the one lowest so far continues alone. Two searches of one
+command can end in places a classifier tells apart very differently, and the one ahead early stayed ahead.
+A rerun asks what an unbroken run asks: each trial's sampler is seeded by the seed, the search and the trial's
+number (CMA-ES keeps its state in the study, not in the sampler), which search goes next is read from the
+studies alone, and the trials a killed run had asked are scored as they were asked.
 """
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 import warnings
 from pathlib import Path
@@ -19,12 +23,17 @@ from sasmi.realism.preset_space import apply, knob
 from sasmi.scene.preset import Preset
 
 
-def sampler_for(cfg, x0: dict[str, float], number: int):
-    """The sampler that asks trial `number`, seeded by the seed and that number alone: a rerun asks exactly what an
-    unbroken run asks (CMA-ES keeps its state in the study, not in the sampler)."""
+def study_name(search: int) -> str:
+    return "calibrate" if search == 0 else f"calibrate-{search}"
+
+
+def sampler_for(cfg, x0: dict[str, float], number: int, search: int = 0):
+    """The sampler that asks trial `number` of `search`, seeded by the seed, the search and that number alone: a rerun
+    asks exactly what an unbroken run asks (CMA-ES keeps its state in the study, not in the sampler)."""
     import optuna
 
-    seed = int(np.random.SeedSequence([cfg.seed, number]).generate_state(1)[0])
+    entropy = [cfg.seed, number] if search == 0 else [cfg.seed, number, search]  # search 0: as with one search
+    seed = int(np.random.SeedSequence(entropy).generate_state(1)[0])
     if cfg.sampler == "cmaes":
         with warnings.catch_warnings():  # x0 (the start preset as CMA-ES's mean) is deprecated from Optuna 4.9 on,
             warnings.simplefilter("ignore", FutureWarning)  # to go in 6.0 (pyproject pins optuna < 6)
@@ -32,16 +41,50 @@ def sampler_for(cfg, x0: dict[str, float], number: int):
     return optuna.samplers.TPESampler(seed=seed, multivariate=True)
 
 
-def open_study(out: Path, cfg, x0: dict[str, float]):
+def open_studies(out: Path, cfg, x0: dict[str, float]) -> list:
+    """The `cfg.searches` studies, made or continued; each one's trial 0 is the start preset."""
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage = optuna.storages.RDBStorage(f"sqlite:///{(out / 'study.db').resolve()}")
-    study = optuna.create_study(study_name="calibrate", storage=storage, sampler=sampler_for(cfg, x0, 0),
-                                direction="minimize", load_if_exists=True)
-    if not study.trials:
-        study.enqueue_trial(x0)  # trial 0 is the start preset: the report's "before"
-    return study
+    studies = []
+    for search in range(cfg.searches):
+        study = optuna.create_study(study_name=study_name(search), storage=storage,
+                                    sampler=sampler_for(cfg, x0, 0, search), direction="minimize", load_if_exists=True)
+        if not study.trials:
+            study.enqueue_trial(x0)  # trial 0 is the start preset: the report's "before"
+        studies.append(study)
+    return studies
+
+
+def searched_seconds(studies: list) -> float:
+    """Wall time of the search, all searches and runs together: what --minutes counts."""
+    return sum(float(s.user_attrs.get("seconds", 0.0)) for s in studies)
+
+
+def lowest(study) -> float:
+    """The study's best objective so far (infinite before its first trial is told)."""
+    with contextlib.suppress(ValueError):
+        return study.best_value
+    return math.inf
+
+
+def leader(studies: list) -> int:
+    return min(range(len(studies)), key=lambda i: (lowest(studies[i]), i))
+
+
+def next_search(studies: list, cfg) -> int | None:
+    """The search that asks the next batch, or None once the budget (--minutes, --trials) is spent. Each search runs
+    until its share of the first half of the budget, the one with the fewest trials first; then the leader alone."""
+    seconds = [searched_seconds([s]) for s in studies]
+    counts = [asked(s) for s in studies]
+    budget = cfg.minutes * 60
+    if sum(seconds) >= budget or (cfg.trials is not None and sum(counts) >= cfg.trials):
+        return None
+    share = 2 * len(studies)
+    racing = [i for i in range(len(studies)) if len(studies) > 1 and seconds[i] < budget / share
+              and (cfg.trials is None or counts[i] < math.ceil(cfg.trials / share))]
+    return min(racing, key=lambda i: (counts[i], i)) if racing else leader(studies)
 
 
 def asked(study) -> int:
@@ -74,15 +117,13 @@ def suggest(trial, names: tuple[str, ...]) -> dict[str, float]:
     return values
 
 
-def run_batch(study, preset: Preset, cfg, x0: dict[str, float], run, width: int) -> None:
-    """`width` trials asked (or those a killed run asked), scored together and told; their wall time is added to
-    the search time."""
-    from sasmi.realism.calibration_report import searched_seconds
-
+def run_batch(study, search: int, preset: Preset, cfg, x0: dict[str, float], run, width: int) -> None:
+    """`width` trials of `search` asked (or those a killed run asked), scored together and told; their wall time is
+    added to the search's time."""
     start = time.perf_counter()
     trials = interrupted_trials(study, cfg)
     for _ in range(width - len(trials)):
-        study.sampler = sampler_for(cfg, x0, len(study.get_trials(deepcopy=False)))
+        study.sampler = sampler_for(cfg, x0, len(study.get_trials(deepcopy=False)), search)
         trials.append(study.ask())
     scores = run([apply(preset.raw, suggest(t, cfg.params)) for t in trials])
     for trial, s in zip(trials, scores):
@@ -90,7 +131,7 @@ def run_batch(study, preset: Preset, cfg, x0: dict[str, float], run, width: int)
             if key != "objective":
                 trial.set_user_attr(key, value)
         study.tell(trial, s["objective"])
-    study.set_user_attr("seconds", searched_seconds(study) + time.perf_counter() - start)
+    study.set_user_attr("seconds", searched_seconds([study]) + time.perf_counter() - start)
 
 
 def calibrated_trial(study, preset: Preset, cfg, final, objectives_of, draws: list[int]) -> tuple[dict, object]:

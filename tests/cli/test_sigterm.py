@@ -47,14 +47,16 @@ def test_a_calibration_terminated_midway_stops_after_its_trial_and_the_rerun_con
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
     storage = f"sqlite:///{tmp_path / 'run' / 'study.db'}"
 
-    def trials() -> list:
+    def trials() -> dict[str, list]:
+        """Each racing search's trials."""
         try:
-            return optuna.load_study(study_name="calibrate", storage=storage).trials
+            return {s.study_name: optuna.load_study(study_name=s.study_name, storage=storage).trials
+                    for s in optuna.get_all_studies(storage)}
         except Exception:  # the study is not made yet
-            return []
+            return {}
 
     deadline = time.monotonic() + 180
-    while len(trials()) < 4:
+    while sum(map(len, trials().values())) < 4:
         assert time.monotonic() < deadline, "fewer than 4 trials in 180 s"
         assert process.poll() is None, process.communicate()[1]  # its stderr: why it stopped early
         time.sleep(0.2)
@@ -62,9 +64,10 @@ def test_a_calibration_terminated_midway_stops_after_its_trial_and_the_rerun_con
     _, err = process.communicate(timeout=120)
     assert process.returncode == 128 + signal.SIGTERM, err
     assert "Traceback" not in err and "rerun the same command to continue" in err.strip().splitlines()[-1]
-    before = [t.params for t in trials()]
-    assert 4 <= len(before) < 12 and not (tmp_path / "run" / "preset.toml").exists()
+    before = {name: [t.params for t in ts] for name, ts in trials().items()}
+    assert 4 <= sum(map(len, before.values())) < 12 and not (tmp_path / "run" / "preset.toml").exists()
     subprocess.run(command, check=True, capture_output=True, timeout=300)
     after = trials()
-    assert len(after) == 12 and [t.params for t in after[:len(before)]] == before
+    assert sum(map(len, after.values())) == 12 and set(after) == {"calibrate", "calibrate-1"}
+    assert all([t.params for t in after[name][:len(ts)]] == ts for name, ts in before.items())
     assert (tmp_path / "run" / "preset.toml").is_file()

@@ -411,7 +411,7 @@ def test_on_floors_where_no_target_is_found_one_render_in_16_with_one_passes_by_
 
 def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_path):
     real, start = known
-    cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16)
+    cfg = CalibrateConfig(params=("post.gain",), trials=25, chips=16, size=64, final_chips=16, searches=1)
     out = calibrate(real, start, cfg, tmp_path / "run", progress=False)
     fitted = load_preset(out / "preset.toml")
     assert fitted.raw["post"]["gain"] == pytest.approx(0.3, rel=0.15)
@@ -462,7 +462,7 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
 
 def test_a_calibration_killed_inside_a_trial_resumes_exactly(known, tmp_path, monkeypatch):
     """Killed while a trial of CMA-ES's second generation renders, the rerun scores that trial as it was asked and
-    asks what an unbroken run asks: every trial's knobs and score alike."""
+    asks what an unbroken run asks: every trial's knobs and score alike, in each of two racing searches."""
     import optuna
 
     import sasmi.realism.calibrate as calibrate_module
@@ -471,27 +471,28 @@ def test_a_calibration_killed_inside_a_trial_resumes_exactly(known, tmp_path, mo
         pass
 
     real, start = known
-    cfg = CalibrateConfig(params=("post.gain",), trials=10, chips=8, size=64, final_chips=8)
+    cfg = CalibrateConfig(params=("post.gain",), trials=16, chips=8, size=64, final_chips=8, searches=2)
     whole = calibrate(real, start, cfg, tmp_path / "whole", progress=False)
     scored, calls = calibrate_module.trial_score, []
 
-    def dies_at_the_seventh(*args):
+    def dies_at_the_eleventh(*args):  # racing ends at 4 trials a search: the leader's 7th trial
         calls.append(1)
-        if len(calls) == 7:
+        if len(calls) == 11:
             raise Killed  # as kill -9: nothing told, the trial left asked
         return scored(*args)
 
-    monkeypatch.setattr(calibrate_module, "trial_score", dies_at_the_seventh)
+    monkeypatch.setattr(calibrate_module, "trial_score", dies_at_the_eleventh)
     with pytest.raises(Killed):
         calibrate(real, start, cfg, tmp_path / "cut", progress=False)
     monkeypatch.setattr(calibrate_module, "trial_score", scored)
     calibrate(real, start, cfg, tmp_path / "cut", progress=False)
 
     def trials(out):
-        return [(t.state, t.params, t.value) for t in
-                optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}").trials]
+        return [[(t.state, t.params, t.value) for t in
+                 optuna.load_study(study_name=name, storage=f"sqlite:///{out / 'study.db'}").trials]
+                for name in ("calibrate", "calibrate-1")]
 
-    assert trials(tmp_path / "cut") == trials(whole) and len(trials(whole)) == 10
+    assert trials(tmp_path / "cut") == trials(whole) and sorted(map(len, trials(whole))) == [4, 12]
     assert (tmp_path / "cut" / "preset.toml").read_text() == (whole / "preset.toml").read_text()
 
 
