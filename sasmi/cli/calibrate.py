@@ -36,6 +36,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=d.size, help=f"render and statistics size (default: {d.size})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per pixel (default: {d.spp})")
     p.add_argument("--sampler", choices=SAMPLERS, default=d.sampler, help=f"Optuna sampler (default: {d.sampler})")
+    p.add_argument("--step", type=float, default=d.step, metavar="S",
+                   help="CMA-ES's first step, a fraction of each knob's range; it grows or shrinks as the search goes "
+                        f"(default: {d.step:g}; Optuna's own: 1/6)")
     p.add_argument("--searches", type=int, default=d.searches, metavar="N",
                    help="searches from the start, each its own sampler path over the same scenes, that race over the "
                         "first half of --minutes; the lowest then continues alone "
@@ -74,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     from sasmi.realism.preset_space import named_knobs
 
     cfg = CalibrateConfig(params=named_knobs(args.params), minutes=args.minutes, trials=args.trials, chips=args.chips,
-                          size=args.size, spp=args.spp, sampler=args.sampler, searches=args.searches, seed=args.seed,
+                          size=args.size, spp=args.spp, sampler=args.sampler, step=args.step,
+                          searches=args.searches, seed=args.seed,
                           variety_weight=args.variety_weight, distribution_weight=args.distribution_weight,
                           spread_correction=not args.plain_fid,
                           workers=args.workers, scheduler=args.scheduler,

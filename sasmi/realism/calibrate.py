@@ -62,9 +62,12 @@ class CalibrateConfig:
     size: int = 128  # render size and statistics size (the statistics' thresholds are stated at 128 px)
     spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
+    # CMA-ES's first step, a fraction of each knob's range: searches begun at Optuna's 1/6 spent most of their time
+    # shrinking it (to 0.06 after 400 trials, 0.025 after 1,100; docs/calibrate.md)
+    step: float = 0.05
     # searches racing over the first half of the time, each its own sampler path over the same scenes; the lowest
     # then continues alone (1: one search all along)
-    searches: int = 2
+    searches: int = 1
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     # weight of the statistics' AUCs, chip by chip: what keeps most renders from lying on one side of most real chips
     # (off by default: from muscle_paper it cost the φ-FID ratio, and a classifier told the renders as well)
@@ -93,6 +96,8 @@ class CalibrateConfig:
                              ("--distribution-weight", self.distribution_weight)):
             if not weight >= 0:
                 raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
+        if not 0 < self.step <= 0.5:
+            raise SasmiError(f"--step: {self.step:g} (allowed: above 0, at most 0.5)")
         if self.searches < 1:
             raise SasmiError(f"--searches: {self.searches} (allowed: >= 1)")
         if self.contenders < 1:

@@ -1,8 +1,8 @@
 """`sasmi calibrate`'s search: its Optuna studies in RUN/study.db, asked and told in batches, resumed exactly.
 
 With --searches N, N studies (each its own sampler path from the start, over the same scenes) race: each runs for
-its share of the first half of the search time, then the one lowest so far continues alone. Two searches of one
-command can end in places a classifier tells apart very differently, and the one ahead early stayed ahead.
+its share of the first half of the search time, then the one lowest so far continues alone: single searches of one
+command can end where a classifier tells their chips from real ones very differently (docs/calibrate.md).
 A rerun asks what an unbroken run asks: each trial's sampler is seeded by the seed, the search and the trial's
 number (CMA-ES keeps its state in the study, not in the sampler), which search goes next is read from the
 studies alone, and the trials a killed run had asked are scored as they were asked.
@@ -35,9 +35,9 @@ def sampler_for(cfg, x0: dict[str, float], number: int, search: int = 0):
     entropy = [cfg.seed, number] if search == 0 else [cfg.seed, number, search]  # search 0: as with one search
     seed = int(np.random.SeedSequence(entropy).generate_state(1)[0])
     if cfg.sampler == "cmaes":
-        with warnings.catch_warnings():  # x0 (the start preset as CMA-ES's mean) is deprecated from Optuna 4.9 on,
+        with warnings.catch_warnings():  # x0 and sigma0 (the start preset, the first step) are deprecated from 4.9 on,
             warnings.simplefilter("ignore", FutureWarning)  # to go in 6.0 (pyproject pins optuna < 6)
-            return optuna.samplers.CmaEsSampler(x0=x0, seed=seed, warn_independent_sampling=False)
+            return optuna.samplers.CmaEsSampler(x0=x0, sigma0=cfg.step, seed=seed, warn_independent_sampling=False)
     return optuna.samplers.TPESampler(seed=seed, multivariate=True)
 
 
