@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sampler", choices=SAMPLERS, default=d.sampler, help=f"Optuna sampler (default: {d.sampler})")
     p.add_argument("--step", type=float, default=d.step, metavar="S",
                    help="CMA-ES's first step, a fraction of each knob's range; it grows or shrinks as the search goes "
-                        f"(default: {d.step:g}; Optuna's own: 1/6)")
+                        "(default: Optuna's own, 1/6)")
     p.add_argument("--searches", type=int, default=d.searches, metavar="N",
                    help="searches from the start, each its own sampler path over the same scenes, that race over the "
                         "first half of --minutes; the lowest then continues alone "

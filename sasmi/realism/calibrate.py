@@ -62,9 +62,9 @@ class CalibrateConfig:
     size: int = 128  # render size and statistics size (the statistics' thresholds are stated at 128 px)
     spp: int = 4  # samples per pixel: the render time at 128 px hardly depends on it
     sampler: str = "cmaes"  # "cmaes": Optuna's CMA-ES started at the start preset; "tpe": Optuna's TPE
-    # CMA-ES's first step, a fraction of each knob's range: searches begun at Optuna's 1/6 spent most of their time
-    # shrinking it (to 0.06 after 400 trials, 0.025 after 1,100; docs/calibrate.md)
-    step: float = 0.05
+    # CMA-ES's first step, a fraction of each knob's range (None: Optuna's own, 1/6). Begun at 0.05, two searches
+    # fell faster but fitted their own scenes more than other draws: no better on held-out chips (docs/calibrate.md)
+    step: float | None = None
     # searches racing over the first half of the time, each its own sampler path over the same scenes; the lowest
     # then continues alone (1: one search all along)
     searches: int = 1
@@ -96,7 +96,7 @@ class CalibrateConfig:
                              ("--distribution-weight", self.distribution_weight)):
             if not weight >= 0:
                 raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
-        if not 0 < self.step <= 0.5:
+        if self.step is not None and not 0 < self.step <= 0.5:
             raise SasmiError(f"--step: {self.step:g} (allowed: above 0, at most 0.5)")
         if self.searches < 1:
             raise SasmiError(f"--searches: {self.searches} (allowed: >= 1)")
@@ -138,8 +138,10 @@ def _check_record(out: Path, record: dict) -> None:
             old = json.loads(path.read_text())
         except (OSError, ValueError):
             raise SasmiError(f"{path}: unreadable; remove {out} or choose another --out") from None
-        if old.get("identity") != record["identity"]:
-            changed = sorted(k for k in record["identity"] if old.get("identity", {}).get(k) != record["identity"][k])
+        # a study begun before --step and --searches existed was one search at Optuna's own first step
+        kept = {"step": None, "searches": 1, **old.get("identity", {})}
+        if kept != record["identity"]:
+            changed = sorted(k for k in record["identity"] if kept.get(k) != record["identity"][k])
             raise SasmiError(f"{out}: holds a calibration with other settings ({', '.join(changed)}); rerun with "
                              "its settings to continue it, or choose another --out")
     write_text(path, json.dumps(record, indent=2) + "\n")

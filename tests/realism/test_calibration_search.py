@@ -1,14 +1,18 @@
-"""`sasmi calibrate --searches N`: the searches race over the first half of the budget, by time or by trials, and the
-lowest then continues alone; the report and the calibrated trial are the leader's."""
+"""`sasmi calibrate`'s search: --step sets CMA-ES's first step; with --searches N the searches race over the first half
+of the budget, by time or by trials, and the lowest then continues alone; the report and the calibrated trial are the
+leader's; a study begun before either flag continues as one search at Optuna's own step."""
 from __future__ import annotations
 
+import json
 import re
 
+import numpy as np
 import optuna
 import pytest
 
 from sasmi.realism.calibrate import CalibrateConfig, calibrate
-from sasmi.realism.calibration_study import leader, next_search, study_name
+from sasmi.errors import SasmiError
+from sasmi.realism.calibration_study import leader, next_search, sampler_for, study_name
 from sasmi.scene.preset import load_preset
 
 GAIN = optuna.distributions.FloatDistribution(0.01, 3.0)
@@ -82,3 +86,51 @@ def test_the_report_and_the_calibrated_preset_are_the_leaders(real_chips, tmp_pa
 def load_gain(raw: dict) -> float:
     gain = raw["post"]["gain"]
     return sum(gain["uniform"]) / 2 if isinstance(gain, dict) else float(gain)
+
+
+def first_generation(step: float | None) -> np.ndarray:
+    """How far the 6 trials after the start (trial 0) lie from it, knob by knob, in fractions of each knob's range."""
+    cfg = CalibrateConfig(params=("post.gain", "post.tvg_strength"), step=step)
+    x0 = {"post.gain": 0.5, "post.tvg_strength": 0.5}
+    study = optuna.create_study(direction="minimize", sampler=sampler_for(cfg, x0, 0))
+    study.enqueue_trial(x0)
+    moves = []
+    for number in range(7):  # CMA-ES draws 6 a generation over 2 knobs
+        study.sampler = sampler_for(cfg, x0, number)
+        trial = study.ask()
+        gain = trial.suggest_float("post.gain", 0.03, 2.0, log=True)
+        tvg = trial.suggest_float("post.tvg_strength", 0.0, 1.0)
+        study.tell(trial, 1.0)
+        moves.append([np.log(gain / 0.5) / np.log(2.0 / 0.03), tvg - 0.5])
+    return np.array(moves[1:])
+
+
+def test_the_first_generation_lies_a_step_from_the_start():
+    """The same draws of the same seed, at 0.05 of each knob's range in place of Optuna's 1/6: 0.3 x as far."""
+    default, small = first_generation(None), first_generation(0.05)
+    assert 0.05 < np.sqrt(np.mean(default ** 2)) < 0.5
+    np.testing.assert_allclose(small, 0.3 * default, atol=0.005)
+
+
+def test_a_study_begun_before_the_flags_continues_as_one_search_at_optunas_step(real_chips, tmp_path, monkeypatch):
+    import sasmi.realism.calibrate as calibrate_module
+
+    monkeypatch.setattr(calibrate_module, "trial_score", lambda raw, *args: {
+        "objective": 0.01 + abs(load_gain(raw) - 0.4), "statistics": 0.0, "distribution": 0.0, "phi_ratio": 1.0,
+        "recall": 0.5, "passed": 0})
+    cfg = CalibrateConfig(params=("post.gain",), trials=4, chips=8, size=32, final_chips=8, contenders=1,
+                          profile_trials=0)
+    out = calibrate(real_chips / "targets", "muscle_paper", cfg, tmp_path / "run", progress=False)
+    record = json.loads((out / "calibrate.json").read_text())
+    for key in ("step", "searches"):
+        del record["identity"][key]
+    (out / "calibrate.json").write_text(json.dumps(record))
+    for changed, named in (({"searches": 2}, "searches"), ({"step": 0.05}, "step")):
+        with pytest.raises(SasmiError, match=f"other settings \\({named}\\)"):
+            calibrate(real_chips / "targets", "muscle_paper", CalibrateConfig(**{**cfg.__dict__, **changed}), out,
+                      progress=False)
+    calibrate(real_chips / "targets", "muscle_paper", CalibrateConfig(**{**cfg.__dict__, "trials": 6}), out,
+              progress=False)
+    assert len(optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}").trials) == 6
+    with pytest.raises(SasmiError, match="--step: 0.6"):
+        CalibrateConfig(step=0.6).validate()
