@@ -19,14 +19,7 @@ DATA=../shared/data/sonar-chips
 for seed in 0 1; do
     run=$RUNS/default-rocks-$seed
     $SASMI calibrate --real "$RUNS/split/train/targets" --minutes "$MINUTES" --seed $seed --out "$run"
-    $SASMI render "$run/preset.toml" --count 400 --size 128 --out "$run/renders"
-    $SASMI stats "$RUNS/split/validation/targets" "$run/renders" "$RUNS/cylinder-renders" --check || true
-    $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$run/two-sample" \
-        --set calibrated="$run/renders" --set cylinder_chip="$RUNS/cylinder-renders"
-    for hide in target none; do
-        .venv/bin/python benchmarks/two_sample_seeds.py --real "$RUNS/split/validation/targets" --seeds 2 \
-            --hide $hide "$RUNS/cylinder-renders" "$run/renders"
-    done
+    benchmarks/judge_calibration.sh "$RUNS" "$run"
 done
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
     --out "$RUNS/rocks-muscle"

@@ -24,12 +24,5 @@ for start_seed in "$@"; do
     run=$RUNS/step-$start-$seed
     $SASMI calibrate --real "$RUNS/split/train/targets" --preset "$start" --minutes "$MINUTES" --seed "$seed" \
         --step 0.05 --profile-trials 0 --out "$run"
-    $SASMI render "$run/preset.toml" --count 400 --size 128 --out "$run/renders"
-    $SASMI stats "$RUNS/split/validation/targets" "$run/renders" "$RUNS/cylinder-renders" --check || true
-    $SASMI evaluate --real "$RUNS/split/validation/targets" --out "$run/two-sample" \
-        --set calibrated="$run/renders" --set cylinder_chip="$RUNS/cylinder-renders"
-    for hide in target none; do
-        .venv/bin/python benchmarks/two_sample_seeds.py --real "$RUNS/split/validation/targets" --seeds 2 \
-            --hide $hide "$RUNS/cylinder-renders" "$run/renders"
-    done
+    benchmarks/judge_calibration.sh "$RUNS" "$run"
 done
