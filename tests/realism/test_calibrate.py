@@ -447,6 +447,7 @@ def test_calibrate_recovers_a_known_gain_and_continues_when_rerun(known, tmp_pat
     (out / "calibrate.json").write_text(json.dumps(record))
     with pytest.raises(SasmiError, match="other settings \\(statistics\\)"):
         calibrate(real, start, CalibrateConfig(**{**cfg.__dict__, "trials": 30}), out, progress=False)
+    (out / "calibrate.json").write_text(kept)
     # the φ and distribution terms are part of what a rerun must share: named among the settings that differ
     refused = {}
     for flag in ([], ["--plain-fid"], ["--distribution-weight", "1"]):
