@@ -43,6 +43,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="searches from the start, each its own sampler path over the same scenes, that race over the "
                         "first half of --minutes; the lowest then continues alone "
                         f"(default: {d.searches}; 1: one search all along)")
+    p.add_argument("--redraw-scenes", action="store_true",
+                   help="each CMA-ES generation renders its own draw of the scenes, all its trials the same one, so "
+                        "that the search cannot fit one draw (default: every trial the same scenes; "
+                        "docs/calibrate.md)")
     p.add_argument("--workers", type=int, default=1,
                    help="local Dask processes scoring trials side by side (default: 1, here one after another)")
     p.add_argument("--scheduler", type=scheduler_address, metavar="tcp://HOST:PORT",
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = CalibrateConfig(params=named_knobs(args.params), minutes=args.minutes, trials=args.trials, chips=args.chips,
                           size=args.size, spp=args.spp, sampler=args.sampler, step=args.step,
-                          searches=args.searches, seed=args.seed,
+                          searches=args.searches, redraw_scenes=args.redraw_scenes, seed=args.seed,
                           variety_weight=args.variety_weight, distribution_weight=args.distribution_weight,
                           spread_correction=not args.plain_fid,
                           workers=args.workers, scheduler=args.scheduler,

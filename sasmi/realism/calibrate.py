@@ -68,6 +68,9 @@ class CalibrateConfig:
     # searches racing over the first half of the time, each its own sampler path over the same scenes; the lowest
     # then continues alone (1: one search all along)
     searches: int = 1
+    # each CMA-ES generation renders its own draw of the scenes (all its trials the same one), so that no search fits
+    # one draw; False: every trial the same scenes
+    redraw_scenes: bool = False
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     # weight of the statistics' AUCs, chip by chip: what keeps most renders from lying on one side of most real chips
     # (off by default: from muscle_paper it cost the φ-FID ratio, and a classifier told the renders as well)
@@ -98,6 +101,8 @@ class CalibrateConfig:
                 raise SasmiError(f"{flag}: {weight:g} (allowed: >= 0)")
         if self.step is not None and not 0 < self.step <= 0.5:
             raise SasmiError(f"--step: {self.step:g} (allowed: above 0, at most 0.5)")
+        if self.redraw_scenes and self.sampler != "cmaes":
+            raise SasmiError("--redraw-scenes: draws per CMA-ES generation; TPE has none (use --sampler cmaes)")
         if self.searches < 1:
             raise SasmiError(f"--searches: {self.searches} (allowed: >= 1)")
         if self.contenders < 1:
@@ -123,11 +128,12 @@ class CalibrateConfig:
                          "refine_steps")}
 
 
-def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int) -> np.ndarray:
-    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are."""
+def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int, first: int = 0) -> np.ndarray:
+    """(count, S, S) float32 in [0, 1], rounded to 8 bits as the real chips' PNGs are: scenes first, first + 1, ...
+    of `seed`."""
     from sasmi.renderset.order import render_grouped
 
-    images = render_grouped([preset.sample(seed, i) for i in range(count)], cfg.size, cfg.spp)
+    images = render_grouped([preset.sample(seed, i) for i in range(first, first + count)], cfg.size, cfg.spp)
     return (np.round(np.clip(images, 0, 1) * 255) / 255).astype(np.float32)
 
 
@@ -138,8 +144,9 @@ def _check_record(out: Path, record: dict) -> None:
             old = json.loads(path.read_text())
         except (OSError, ValueError):
             raise SasmiError(f"{path}: unreadable; remove {out} or choose another --out") from None
-        # a study begun before --step and --searches existed was one search at Optuna's own first step
-        kept = {"step": None, "searches": 1, **old.get("identity", {})}
+        # a study begun before --step, --searches and --redraw-scenes existed was one search at Optuna's own first step,
+    # every trial on the same scenes
+        kept = {"step": None, "searches": 1, "redraw_scenes": False, **old.get("identity", {})}
         if kept != record["identity"]:
             changed = sorted(k for k in record["identity"] if kept.get(k) != record["identity"][k])
             raise SasmiError(f"{out}: holds a calibration with other settings ({', '.join(changed)}); rerun with "
@@ -147,11 +154,13 @@ def _check_record(out: Path, record: dict) -> None:
     write_text(path, json.dumps(record, indent=2) + "\n")
 
 
-def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: CalibrateConfig, encoder) -> dict:
-    """One trial: the candidate preset's `cfg.chips` renders scored, or the rule one of its draws broke."""
+def trial_score(raw: dict, preset_path: Path | None, real: RealChips, cfg: CalibrateConfig, encoder,
+                first: int = 0) -> dict:
+    """One trial: the candidate preset's `cfg.chips` renders (scenes `first`, ... of `cfg.seed`) scored, or the rule
+    one of its draws broke."""
     try:
         candidate = Preset.from_dict(raw, path=preset_path)
-        images = render_chips(candidate, cfg.chips, cfg, cfg.seed)
+        images = render_chips(candidate, cfg.chips, cfg, cfg.seed, first)
     except SasmiError as e:  # knobs that break a cross-field rule in some scene (a buried target, ...)
         return {"objective": FAILED, "invalid": str(e)}
     s = score(images, real, encoder, cfg.weights())
@@ -166,7 +175,7 @@ def _worker_encoder(phi: str | None):
 
 
 def _on_worker(raw: dict, preset_path: Path | None, real: RealChips, cfg: CalibrateConfig, phi: str | None,
-               threads: int | None) -> dict:
+               threads: int | None, first: int) -> dict:
     """`trial_score` on a Dask worker: its own φ (loaded once per process) and its share of the cores."""
     import drjit
     import torch
@@ -174,16 +183,18 @@ def _on_worker(raw: dict, preset_path: Path | None, real: RealChips, cfg: Calibr
     torch.set_num_threads(1)
     if threads:
         drjit.set_thread_count(threads)
-    return trial_score(raw, preset_path, real, cfg, _worker_encoder(phi))
+    return trial_score(raw, preset_path, real, cfg, _worker_encoder(phi), first)
 
 
 @contextlib.contextmanager
 def trial_runner(cfg: CalibrateConfig, preset: Preset, real: RealChips, encoder, phi) -> Iterator[tuple]:
-    """(run, width): run(raws[, seed]) -> their scores, `width` trials at a time: here, or on a Dask cluster
-    (--scheduler, or --workers local processes, each with its share of the cores)."""
+    """(run, width): run(raws[, seed][, firsts]) -> their scores (each raw's scenes from its first, default 0),
+    `width` trials at a time: here, or on a Dask cluster (--scheduler, or --workers local processes, each with its
+    share of the cores)."""
     if cfg.workers == 1 and not cfg.scheduler:
-        yield (lambda raws, seed=cfg.seed: [trial_score(raw, preset.path, real, replace(cfg, seed=seed), encoder)
-                                            for raw in raws]), 1
+        yield (lambda raws, seed=cfg.seed, firsts=None: [
+            trial_score(raw, preset.path, real, replace(cfg, seed=seed), encoder, first)
+            for raw, first in zip(raws, firsts or [0] * len(raws))]), 1
         return
     from sasmi.renderset.cluster import dask_client
     from sasmi.renderset.threads import local_threads
@@ -196,9 +207,10 @@ def trial_runner(cfg: CalibrateConfig, preset: Preset, real: RealChips, encoder,
         shared = client.scatter(light, broadcast=True, hash=False)
         path = None if phi is None else str(phi)
 
-        def run(raws: list[dict], seed: int = cfg.seed) -> list[dict]:
+        def run(raws: list[dict], seed: int = cfg.seed, firsts: list[int] | None = None) -> list[dict]:
             return client.gather([client.submit(_on_worker, raw, preset.path, shared, replace(cfg, seed=seed), path,
-                                                threads, pure=False) for raw in raws])
+                                                threads, first, pure=False)
+                                  for raw, first in zip(raws, firsts or [0] * len(raws))])
 
         yield run, max(1, sum(client.nthreads().values()))
 

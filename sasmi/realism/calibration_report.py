@@ -299,7 +299,9 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
         f"# Calibration of {Path(record['start']).name} to {record['real']}", "",
         *search_lines(studies, chosen),
         f"{len(study.trials)} trials in {searched_seconds([study]) / 60:.1f} minutes of search ({cfg.sampler}, "
-        f"{cfg.chips} renders of {cfg.size}² px per trial); objective {study.trials[0].value:.3g} at the start, "
+        f"{cfg.chips} renders of {cfg.size}² px per trial"
+        f"{', each generation on its own draw of the scenes' if cfg.redraw_scenes else ''}); "
+        f"objective {study.trials[0].value:.3g} at the start, "
         f"{study.best_value:.3g} at the best (trial {study.best_trial.number}). Calibrated: trial {best.number} "
         f"({best.value:.3g}), of the {len(contenders)} best the one scoring lowest on {draws} other draws of "
         f"the search's scenes ({min(c[2] for c in contenders):.3g}; the others "

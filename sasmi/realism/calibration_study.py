@@ -108,6 +108,13 @@ def interrupted_trials(study, cfg) -> list:
     return asked
 
 
+def first_scene(study, trial, cfg) -> int:
+    """The first of the scenes the trial renders: 0, or with --redraw-scenes, the first of its CMA-ES generation's own
+    draw (the start preset, asked before the first generation, renders the first draw)."""
+    generation = study._storage.get_trial_system_attrs(trial._trial_id).get("cma:generation")
+    return 0 if not cfg.redraw_scenes or generation is None else cfg.chips * (generation + 1)
+
+
 def suggest(trial, names: tuple[str, ...]) -> dict[str, float]:
     values = {}
     for name in names:
@@ -125,7 +132,8 @@ def run_batch(study, search: int, preset: Preset, cfg, x0: dict[str, float], run
     for _ in range(width - len(trials)):
         study.sampler = sampler_for(cfg, x0, len(study.get_trials(deepcopy=False)), search)
         trials.append(study.ask())
-    scores = run([apply(preset.raw, suggest(t, cfg.params)) for t in trials])
+    raws = [apply(preset.raw, suggest(t, cfg.params)) for t in trials]
+    scores = run(raws, cfg.seed, [first_scene(study, t, cfg) for t in trials])
     for trial, s in zip(trials, scores):
         for key, value in s.items():
             if key != "objective":

@@ -1,6 +1,7 @@
 """`sasmi calibrate`'s search: --step sets CMA-ES's first step; with --searches N the searches race over the first half
 of the budget, by time or by trials, and the lowest then continues alone; the report and the calibrated trial are the
-leader's; a study begun before either flag continues as one search at Optuna's own step."""
+leader's; with --redraw-scenes each CMA-ES generation renders its own draw of the scenes; a study begun before these
+flags continues as one search at Optuna's own step, every trial on the same scenes."""
 from __future__ import annotations
 
 import json
@@ -10,7 +11,7 @@ import numpy as np
 import optuna
 import pytest
 
-from sasmi.realism.calibrate import CalibrateConfig, calibrate
+from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
 from sasmi.errors import SasmiError
 from sasmi.realism.calibration_study import leader, next_search, sampler_for, study_name
 from sasmi.scene.preset import load_preset
@@ -122,10 +123,11 @@ def test_a_study_begun_before_the_flags_continues_as_one_search_at_optunas_step(
                           profile_trials=0)
     out = calibrate(real_chips / "targets", "muscle_paper", cfg, tmp_path / "run", progress=False)
     record = json.loads((out / "calibrate.json").read_text())
-    for key in ("step", "searches"):
+    for key in ("step", "searches", "redraw_scenes"):
         del record["identity"][key]
     (out / "calibrate.json").write_text(json.dumps(record))
-    for changed, named in (({"searches": 2}, "searches"), ({"step": 0.05}, "step")):
+    for changed, named in (({"searches": 2}, "searches"), ({"step": 0.05}, "step"),
+                           ({"redraw_scenes": True}, "redraw_scenes")):
         with pytest.raises(SasmiError, match=f"other settings \\({named}\\)"):
             calibrate(real_chips / "targets", "muscle_paper", CalibrateConfig(**{**cfg.__dict__, **changed}), out,
                       progress=False)
@@ -134,3 +136,42 @@ def test_a_study_begun_before_the_flags_continues_as_one_search_at_optunas_step(
     assert len(optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}").trials) == 6
     with pytest.raises(SasmiError, match="--step: 0.6"):
         CalibrateConfig(step=0.6).validate()
+
+
+def firsts_asked(real_chips, out, monkeypatch, **flags) -> list[tuple[int, int, int | None]]:
+    """(trial number, first scene it rendered, its CMA-ES generation) of a 20-trial search over two knobs."""
+    import sasmi.realism.calibrate as calibrate_module
+
+    firsts = []
+
+    def records_its_scenes(raw, preset_path, real, cfg, encoder, first):
+        firsts.append(first)
+        return {"objective": 0.01 + abs(load_gain(raw) - 0.4), "statistics": 0.0, "distribution": 0.0,
+                "phi_ratio": 1.0, "recall": 0.5, "passed": 0}
+
+    monkeypatch.setattr(calibrate_module, "trial_score", records_its_scenes)
+    cfg = CalibrateConfig(params=("post.gain", "post.tvg_strength"), trials=20, chips=8, size=32, final_chips=8,
+                          contenders=1, profile_trials=0, **flags)
+    calibrate(real_chips / "targets", "muscle_paper", cfg, out, progress=False)
+    trials = optuna.load_study(study_name="calibrate", storage=f"sqlite:///{out / 'study.db'}").trials
+    return [(t.number, first, t.system_attrs.get("cma:generation")) for t, first in zip(trials, firsts)]
+
+
+def test_with_redraw_scenes_each_generation_renders_its_own_draw(real_chips, tmp_path, monkeypatch):
+    """CMA-ES asks 6 a generation over two knobs: the start renders scenes 0-7, generation g scenes 8(g + 1), ...;
+    without the flag every trial renders scenes 0-7."""
+    redrawn = firsts_asked(real_chips, tmp_path / "redrawn", monkeypatch, redraw_scenes=True)
+    assert [first for _, first, _ in redrawn] == [0] + [8] * 6 + [16] * 6 + [24] * 6 + [32]
+    assert all(first == 8 * (generation + 1) for _, first, generation in redrawn[1:])
+    assert "each generation on its own draw of the scenes" in (tmp_path / "redrawn" / "report.md").read_text()
+    same = firsts_asked(real_chips, tmp_path / "same", monkeypatch)
+    assert [first for _, first, _ in same] == [0] * 20
+
+
+def test_a_trials_scenes_from_its_first_are_those_of_a_longer_draw():
+    preset = load_preset("cylinder_chip")
+    cfg = CalibrateConfig(size=32, spp=1)
+    np.testing.assert_array_equal(render_chips(preset, 3, cfg, 4, first=3), render_chips(preset, 6, cfg, 4)[3:])
+    assert not np.array_equal(render_chips(preset, 3, cfg, 4, first=3), render_chips(preset, 3, cfg, 4))
+    with pytest.raises(SasmiError, match="--redraw-scenes: .*--sampler cmaes"):
+        CalibrateConfig(redraw_scenes=True, sampler="tpe").validate()
