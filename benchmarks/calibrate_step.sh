@@ -3,8 +3,7 @@
 # each knob's range, where the default is Optuna's 1/6) to the MILCO train targets of the seed-0 split, from each
 # START at each SEED (the command as a user first runs it starts from cylinder_chip); 400 renders of each against the
 # validation targets beside 400 of cylinder_chip: `sasmi stats --check`, the φ-FID ratio and the two-sample test, then
-# the two-sample test of the floor alone and of the whole chip. --profile-trials 0: the profiles judge the calibrated
-# knobs after they are chosen and change no preset (rerun a folder without it for the report's full tables).
+# the two-sample test of the floor alone and of the whole chip (benchmarks/calibrate_variant.sh).
 # benchmarks/calibrate_rocks.sh runs the same at the default step.
 #
 #     benchmarks/calibrate_step.sh [RUNS] [MINUTES] [START:SEED ...]
@@ -13,16 +12,4 @@ set -eu
 RUNS=${1:-runs}
 MINUTES=${2:-30}
 [ $# -gt 2 ] && shift 2 || set -- cylinder_chip:1 cylinder_chip:0 muscle_paper:0
-SASMI=.venv/bin/sasmi
-DATA=../shared/data/sonar-chips
-
-[ -d "$RUNS/split" ] || $SASMI split $DATA --seed 0 --out "$RUNS/split"
-[ -d "$RUNS/cylinder-renders" ] || $SASMI render cylinder_chip --count 400 --size 128 --out "$RUNS/cylinder-renders"
-for start_seed in "$@"; do
-    start=${start_seed%:*}
-    seed=${start_seed#*:}
-    run=$RUNS/step-$start-$seed
-    $SASMI calibrate --real "$RUNS/split/train/targets" --preset "$start" --minutes "$MINUTES" --seed "$seed" \
-        --step 0.05 --profile-trials 0 --out "$run"
-    benchmarks/judge_calibration.sh "$RUNS" "$run"
-done
+exec benchmarks/calibrate_variant.sh "$RUNS" "$MINUTES" step "--step 0.05" "$@"
