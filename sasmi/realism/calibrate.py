@@ -69,7 +69,7 @@ class CalibrateConfig:
     # then continues alone (1: one search all along)
     searches: int = 1
     # each CMA-ES generation renders its own draw of the scenes (all its trials the same one), so that no search fits
-    # one draw; False: every trial the same scenes
+    # one draw. Off: two redrawn searches ended closer together on held-out chips, but no better (docs/calibrate.md)
     redraw_scenes: bool = False
     phi_weight: float = 1.0  # weight of the φ-FID ratio against the mean squared tolerance distance
     # weight of the statistics' AUCs, chip by chip: what keeps most renders from lying on one side of most real chips
