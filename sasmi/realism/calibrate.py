@@ -144,8 +144,8 @@ def _check_record(out: Path, record: dict) -> None:
             old = json.loads(path.read_text())
         except (OSError, ValueError):
             raise SasmiError(f"{path}: unreadable; remove {out} or choose another --out") from None
-        # a study begun before --step, --searches and --redraw-scenes existed was one search at Optuna's own first step,
-    # every trial on the same scenes
+        # a study begun before --step, --searches and --redraw-scenes existed was one search at Optuna's own first
+        # step, every trial on the same scenes
         kept = {"step": None, "searches": 1, "redraw_scenes": False, **old.get("identity", {})}
         if kept != record["identity"]:
             changed = sorted(k for k in record["identity"] if kept.get(k) != record["identity"][k])
