@@ -2,7 +2,7 @@
 # A calibration judged on chips it never saw: 400 renders of RUN/preset.toml against the validation targets of the
 # seed-0 split beside 400 of cylinder_chip (RUNS/cylinder-renders): `sasmi stats --check`, `sasmi evaluate` (φ-FID
 # ratio, precision / recall, two-sample test; RUN/two-sample), then the two-sample test of the floor alone and of the
-# whole chip over two classifier seeds. Used by benchmarks/calibrate_rocks.sh and benchmarks/calibrate_step.sh.
+# whole chip over two classifier seeds. Used by benchmarks/calibrate_rocks.sh and benchmarks/calibrate_variant.sh.
 #
 #     benchmarks/judge_calibration.sh RUNS RUN
 set -eu
