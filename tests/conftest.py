@@ -70,6 +70,17 @@ def _torch_one_thread():
     torch.set_num_threads(threads)
 
 
+@pytest.fixture
+def quick_two_sample(monkeypatch):
+    """`sasmi calibrate`'s report two-sample test (a few seconds of classifier training each) stood in by how far the
+    renders' mean gray level lies from the real chips', as an AUC: for tests of the search, not of that test
+    (tests/realism/test_calibrate.py tests it)."""
+    import sasmi.realism.calibration_objective as objective
+
+    monkeypatch.setattr(objective, "told_apart", lambda real, images, seed: {
+        "auc": float(min(1.0, 0.5 + abs(np.mean(images) - np.mean(real)))), "auc_std": 0.0})
+
+
 @pytest.fixture(scope="session")
 def real_chips() -> Path:
     if not SHARED_CHIPS.is_dir():

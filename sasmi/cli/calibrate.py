@@ -40,9 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="CMA-ES's first step, a fraction of each knob's range; it grows or shrinks as the search goes "
                         "(default: Optuna's own, 1/6)")
     p.add_argument("--searches", type=int, default=d.searches, metavar="N",
-                   help="searches from the start, each its own sampler path over the same scenes, that race over the "
-                        "first half of --minutes; the lowest then continues alone "
-                        f"(default: {d.searches}; 1: one search all along)")
+                   help="searches from the start sharing --minutes, each its own sampler path over its own scenes; "
+                        "the one whose renders a classifier tells least from the real chips is kept (e.g. --searches 2 "
+                        f"--minutes 60; default: {d.searches})")
     p.add_argument("--redraw-scenes", action="store_true",
                    help="each CMA-ES generation renders its own draw of the scenes, all its trials the same one, so "
                         "that the search cannot fit one draw (default: every trial the same scenes; "
@@ -63,6 +63,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "less varied than the real chips would score better (docs/calibrate.md)")
     p.add_argument("--phi", type=Path, metavar="RUN", help="φ autoencoder run or weights (default: the shipped φ)")
     p.add_argument("--seed", type=int, default=d.seed, help="preset draws of the trials (default: 0)")
+    p.add_argument("--final-chips", type=int, default=d.final_chips, metavar="N",
+                   help="renders of the start and of each search's calibrated preset in the report, on scenes no trial "
+                        "rendered: the report's figures and the choice between searches are measured on them "
+                        f"(default: {d.final_chips})")
     p.add_argument("--contenders", type=int, default=d.contenders, metavar="N",
                    help="best trials on the search's scenes scored again on 4 other draws, the lowest calibrated "
                         f"(default: {d.contenders}; 1: the search's best)")
@@ -86,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
                           variety_weight=args.variety_weight, distribution_weight=args.distribution_weight,
                           spread_correction=not args.plain_fid,
                           workers=args.workers, scheduler=args.scheduler,
-                          contenders=args.contenders, profile_trials=args.profile_trials,
+                          final_chips=args.final_chips, contenders=args.contenders, profile_trials=args.profile_trials,
                           refine_steps=args.refine_steps)
     out = calibrate(args.real, args.preset, cfg, args.out, phi=args.phi)
     print(f"wrote {out}/preset.toml and {out}/report.md")

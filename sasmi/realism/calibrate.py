@@ -19,9 +19,10 @@ distribution of looks; the third (off by default) each statistic's distribution,
 tolerance leaves free and a classifier sees (the checked statistics and the nine of `sasmi evaluate`'s signature: each
 one's ROC AUC, renders against real chips, over two standard errors of an AUC of one distribution); the fourth (off by
 default) keeps them as varied as the real chips, which the φ-FID of a few renders does not (docs/calibrate.md says
-what each did). Optuna's CMA-ES (or TPE) searches: --searches of them race over the first half of the time and the
-lowest continues alone (sasmi/realism/calibration_study.py); the studies live in RUN/study.db, so a rerun continues
-them; --minutes counts the search time of all searches and runs together.
+what each did). Optuna's CMA-ES (or TPE) searches: --searches of them share the time, each over its own draw of the
+scenes (sasmi/realism/calibration_study.py), and the one whose report renders `sasmi evaluate`'s two-sample test
+tells least from the real chips is calibrated; the studies live in RUN/study.db, so a rerun continues them;
+--minutes counts the search time of all searches and runs together.
 """
 from __future__ import annotations
 
@@ -39,8 +40,8 @@ from sasmi.errors import SasmiError, Stopped
 from sasmi.images import check_room, write_text
 from sasmi.preprocess import check_size
 from sasmi.realism.calibration_objective import RealChips, Weights, final_score, real_chips, score
-from sasmi.realism.calibration_study import (asked, calibrated_trial, full_disk_named, leader, lowest, next_search,
-                                             open_studies, run_batch, searched_seconds)
+from sasmi.realism.calibration_study import (asked, calibrated_trial, full_disk_named, lowest, next_search,
+                                             open_studies, run_batch, scene_seed, searched_seconds)
 from sasmi.realism.preset_space import DEFAULT_KNOBS, apply, check_knobs, start_values
 from sasmi.scene.preset import Preset, load_preset
 
@@ -65,8 +66,8 @@ class CalibrateConfig:
     # CMA-ES's first step, a fraction of each knob's range (None: Optuna's own, 1/6). Begun at 0.05, two searches
     # fell faster but fitted their own scenes more than other draws: no better on held-out chips (docs/calibrate.md)
     step: float | None = None
-    # searches racing over the first half of the time, each its own sampler path over the same scenes; the lowest
-    # then continues alone (1: one search all along)
+    # searches sharing the time, each its own sampler path over its own draw of the scenes; the one whose report
+    # renders a classifier tells least from the real chips is calibrated (1: one search all along)
     searches: int = 1
     # each CMA-ES generation renders its own draw of the scenes (all its trials the same one), so that no search fits
     # one draw. Off: two redrawn searches ended closer together on held-out chips, but no better (docs/calibrate.md)
@@ -111,9 +112,9 @@ class CalibrateConfig:
             raise SasmiError(f"--profile-trials: {self.profile_trials} (allowed: >= 0)")
         if self.refine_steps < 0:
             raise SasmiError(f"--refine-steps: {self.refine_steps} (allowed: >= 0)")
-        if self.chips < 8 or self.final_chips < 8:
-            raise SasmiError(f"--chips: {min(self.chips, self.final_chips)} (allowed: >= 8; medians of fewer "
-                             "renders move with every draw)")
+        for flag, count in (("--chips", self.chips), ("--final-chips", self.final_chips)):
+            if count < 8:
+                raise SasmiError(f"{flag}: {count} (allowed: >= 8; medians of fewer renders move with every draw)")
         return self
 
     def weights(self) -> Weights:
@@ -123,9 +124,10 @@ class CalibrateConfig:
     def identity(self) -> dict:
         """What a rerun must share to continue the study: everything but the budget, where trials run and what
         follows the search."""
-        return {k: v for k, v in asdict(self).items()
+        kept = {k: v for k, v in asdict(self).items()
                 if k not in ("minutes", "trials", "workers", "scheduler", "contenders", "profile_trials",
-                         "refine_steps")}
+                             "refine_steps")}
+        return {**kept, "search_scenes": "own"}  # each search its own draw (searches once raced over one)
 
 
 def render_chips(preset: Preset, count: int, cfg: CalibrateConfig, seed: int, first: int = 0) -> np.ndarray:
@@ -145,8 +147,9 @@ def _check_record(out: Path, record: dict) -> None:
         except (OSError, ValueError):
             raise SasmiError(f"{path}: unreadable; remove {out} or choose another --out") from None
         # a study begun before --step, --searches and --redraw-scenes existed was one search at Optuna's own first
-        # step, every trial on the same scenes
+        # step, every trial on the same scenes; searches begun before each had its own scenes raced over one draw
         kept = {"step": None, "searches": 1, "redraw_scenes": False, **old.get("identity", {})}
+        kept.setdefault("search_scenes", "own" if kept["searches"] == 1 else "shared")
         if kept != record["identity"]:
             changed = sorted(k for k in record["identity"] if kept.get(k) != record["identity"][k])
             raise SasmiError(f"{out}: holds a calibration with other settings ({', '.join(changed)}); rerun with "
@@ -267,7 +270,6 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                 with full_disk_named(out):
                     width_now = width if cfg.trials is None else min(width, cfg.trials - done)
                     run_batch(studies[search], search, preset, cfg, x0, run, width_now)
-            study = studies[leader(studies)]
             stop.restore()
             bar.close()
             final = replace(cfg, seed=cfg.seed + 1)
@@ -279,23 +281,35 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
                 return [s["objective"] for s in scores]
             # other draws of the search's scenes: some to choose the calibrated trial, others to judge its knobs
             draws = [cfg.seed + 2 + k for k in range(2 * FRESH_DRAWS)]
-            best_raw, best = calibrated_trial(study, preset, cfg, final, objectives, draws[:FRESH_DRAWS])
-            trials = [(t.value, t.params) for t in study.trials if t.value is not None]
-            pins, together = what_the_chips_pin(best.params, trials, objectives, draws[FRESH_DRAWS:],
+            each = [calibrated_trial(study, preset, cfg, final, objectives, draws[:FRESH_DRAWS]) for study in studies]
+            shown = {"start": report_renders(preset, real, encoder, cfg, final)}
+            each_shown = [report_renders(Preset.from_dict(raw, path=preset.path), real, encoder, cfg, final)
+                          for raw, _ in each]
+            search = min(range(len(studies)), key=lambda i: (each_shown[i][1]["two_sample"], i))  # told least
+            (best_raw, best), shown["calibrated"] = each[search], each_shown[search]
+            trials = [(t.value, t.params) for t in studies[search].trials if t.value is not None]
+
+            def kept_objectives(settings: list[dict], seed: int = scene_seed(cfg, search)) -> list[float]:
+                return objectives(settings, seed)  # by default on the kept search's own scenes
+            pins, together = what_the_chips_pin(best.params, trials, kept_objectives, draws[FRESH_DRAWS:],
                                                 cfg.profile_trials, cfg.seed)
             judged.close()
-        shown = {}
-        for name, p in (("start", preset), ("calibrated", Preset.from_dict(best_raw, path=preset.path))):
-            images = render_chips(p, cfg.final_chips, final, final.seed)
-            shown[name] = (images, final_score(images, real, encoder, cfg.weights(), cfg.seed))
         refinement = None
         if cfg.refine_steps:
             best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
                                                                 shown["calibrated"], progress)
-        write_report(out, record, cfg, preset, best_raw, real, studies, shown, pins, together, refinement)
+        judgement = [(trial.number, score) for (_, trial), (_, score) in zip(each, each_shown)]
+        write_report(out, record, cfg, preset, best_raw, real, studies, search, judgement, shown, pins, together,
+                     refinement)
     finally:
         lock.release()
     return out
+
+
+def report_renders(preset: Preset, real: RealChips, encoder, cfg: CalibrateConfig, final: CalibrateConfig) -> tuple:
+    """(renders, score): `cfg.final_chips` renders of scenes no trial rendered, scored with the report's figures."""
+    images = render_chips(preset, cfg.final_chips, final, final.seed)
+    return images, final_score(images, real, encoder, cfg.weights(), cfg.seed)
 
 
 def refine(raw: dict, start: Preset, real: RealChips, encoder, cfg: CalibrateConfig, final: CalibrateConfig,

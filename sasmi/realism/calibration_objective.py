@@ -192,7 +192,8 @@ def score(images: np.ndarray, real: RealChips, encoder, weights: Weights = Weigh
 
 
 def final_score(images: np.ndarray, real: RealChips, encoder, weights: Weights, seed: int) -> dict:
-    """`score` with the φ-FID ratio, precision and recall of `sasmi evaluate` (matched sizes): the report's figures."""
+    """`score` with the φ-FID ratio, precision and recall of `sasmi evaluate` (matched sizes) and its two-sample test
+    (`told_apart`): the report's figures."""
     from sasmi.eval.manifold import precision_recall_matched
     from sasmi.eval.metrics import fid_ratio_matched
 
@@ -202,5 +203,21 @@ def final_score(images: np.ndarray, real: RealChips, encoder, weights: Weights, 
     aucs = s["aucs"] or {k: d["auc"] for k, d in distribution_distances(s["per_chip"], real).items()}
     ratio = fid_ratio_matched(s["features"], real.phi, 200, seed)
     precision, recall = precision_recall_matched(real.phi, s["features"], seed=seed)
+    told = told_apart(real.images, images, seed)
     return {**s, "aucs": aucs, "phi_ratio": ratio.value, "phi_ratio_std": ratio.std, "precision": precision.value,
-            "recall": recall.value}
+            "recall": recall.value, "two_sample": told["auc"], "two_sample_std": told["auc_std"]}
+
+
+def told_apart(real: np.ndarray, images: np.ndarray, seed: int) -> dict:
+    """`sasmi evaluate`'s two-sample test of renders against the real chips, both (N, S, S) in [0, 1]: ROC AUC of a
+    small CNN telling them apart (0.5: it cannot). Of calibrated presets, the one it tells less often from the chips
+    calibrated to was told less often from held-out chips of the same sonar too (docs/calibrate.md)."""
+    from sasmi.eval.config import TwoSampleConfig
+    from sasmi.eval.two_sample import resized, two_sample_auc
+
+    cfg = TwoSampleConfig()
+
+    def small(x: np.ndarray) -> np.ndarray:
+        return resized(np.round(np.clip(x, 0, 1) * 255).astype(np.uint8), cfg.size)
+
+    return two_sample_auc(small(real), small(images), cfg, seed)

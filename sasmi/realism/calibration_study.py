@@ -1,11 +1,11 @@
 """`sasmi calibrate`'s search: its Optuna studies in RUN/study.db, asked and told in batches, resumed exactly.
 
-With --searches N, N studies (each its own sampler path from the start, over the same scenes) race: each runs for
-its share of the first half of the search time, then the one lowest so far continues alone: single searches of one
-command can end where a classifier tells their chips from real ones very differently (docs/calibrate.md).
-A rerun asks what an unbroken run asks: each trial's sampler is seeded by the seed, the search and the trial's
-number (CMA-ES keeps its state in the study, not in the sampler), which search goes next is read from the
-studies alone, and the trials a killed run had asked are scored as they were asked.
+With --searches N, N searches share the search time, each its own sampler path over its own draw of the scenes:
+single searches of one command can end where a classifier tells their chips from real ones very differently, and the
+two-sample test on the chips calibrated to ranks them as held-out chips do (calibrate.py keeps the one it tells least;
+docs/calibrate.md). A rerun asks what an unbroken run asks: each trial's sampler is seeded by the seed, the search and
+the trial's number (CMA-ES keeps its state in the study, not in the sampler), a search's trials depend on no other
+search, and the trials a killed run had asked are scored as they were asked.
 """
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ import numpy as np
 from sasmi.errors import SasmiError
 from sasmi.realism.preset_space import apply, knob
 from sasmi.scene.preset import Preset
+
+SEARCH_SEEDS = 1000  # scene seeds apart from one search to the next
 
 
 def study_name(search: int) -> str:
@@ -69,22 +71,22 @@ def lowest(study) -> float:
     return math.inf
 
 
-def leader(studies: list) -> int:
-    return min(range(len(studies)), key=lambda i: (lowest(studies[i]), i))
+def scene_seed(cfg, search: int) -> int:
+    """The seed of the scenes a search's trials render: the seed for search 0 (as with one search), and draws no
+    other search, the report nor the contenders' other draws (seed + 1 ... + 9) render for the others."""
+    return cfg.seed + SEARCH_SEEDS * search
 
 
 def next_search(studies: list, cfg) -> int | None:
-    """The search that asks the next batch, or None once the budget (--minutes, --trials) is spent. Each search runs
-    until its share of the first half of the budget, the one with the fewest trials first; then the leader alone."""
+    """The search that asks the next batch, or None once the budget (--minutes, --trials) is spent: each of the N
+    searches runs for 1/N of it, the one furthest behind first."""
     seconds = [searched_seconds([s]) for s in studies]
     counts = [asked(s) for s in studies]
-    budget = cfg.minutes * 60
-    if sum(seconds) >= budget or (cfg.trials is not None and sum(counts) >= cfg.trials):
-        return None
-    share = 2 * len(studies)
-    racing = [i for i in range(len(studies)) if len(studies) > 1 and seconds[i] < budget / share
-              and (cfg.trials is None or counts[i] < math.ceil(cfg.trials / share))]
-    return min(racing, key=lambda i: (counts[i], i)) if racing else leader(studies)
+    share = len(studies)
+    running = [i for i in range(share) if seconds[i] < cfg.minutes * 60 / share
+               and (cfg.trials is None or counts[i] < math.ceil(cfg.trials / share))]
+    behind = (lambda i: (seconds[i], i)) if cfg.trials is None else (lambda i: (counts[i], i))
+    return min(running, key=behind) if running else None
 
 
 def asked(study) -> int:
@@ -133,7 +135,7 @@ def run_batch(study, search: int, preset: Preset, cfg, x0: dict[str, float], run
         study.sampler = sampler_for(cfg, x0, len(study.get_trials(deepcopy=False)), search)
         trials.append(study.ask())
     raws = [apply(preset.raw, suggest(t, cfg.params)) for t in trials]
-    scores = run(raws, cfg.seed, [first_scene(study, t, cfg) for t in trials])
+    scores = run(raws, scene_seed(cfg, search), [first_scene(study, t, cfg) for t in trials])
     for trial, s in zip(trials, scores):
         for key, value in s.items():
             if key != "objective":

@@ -43,12 +43,13 @@ def test_a_calibration_terminated_midway_stops_after_its_trial_and_the_rerun_con
 
     command = [sys.executable, "-m", "sasmi", "calibrate", "--real", str(real_chips / "targets"), "--preset",
                "muscle_paper", "--params", "post.gain,post.speckle_looks", "--chips", "8", "--size", "32",
-               "--trials", "12", "--searches", "2", "--out", str(tmp_path / "run")]
+               "--trials", "12", "--searches", "2", "--profile-trials", "0", "--final-chips", "16",
+               "--out", str(tmp_path / "run")]
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
     storage = f"sqlite:///{tmp_path / 'run' / 'study.db'}"
 
     def trials() -> dict[str, list]:
-        """Each racing search's trials."""
+        """Each search's trials."""
         try:
             return {name: optuna.load_study(study_name=name, storage=storage).trials
                     for name in optuna.get_all_study_names(storage)}

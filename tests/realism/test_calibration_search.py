@@ -1,7 +1,8 @@
-"""`sasmi calibrate`'s search: --step sets CMA-ES's first step; with --searches N the searches race over the first half
-of the budget, by time or by trials, and the lowest then continues alone; the report and the calibrated trial are the
-leader's; with --redraw-scenes each CMA-ES generation renders its own draw of the scenes; a study begun before these
-flags continues as one search at Optuna's own step, every trial on the same scenes."""
+"""`sasmi calibrate`'s search: --step sets CMA-ES's first step; with --searches N the searches share the budget, by
+time or by trials, each over its own scenes, and the one whose report renders the two-sample test tells least is
+calibrated; with --redraw-scenes each CMA-ES generation renders its own draw of the scenes; a study begun before these
+flags continues as one search at Optuna's own step, every trial on the same scenes, and searches that raced over one
+draw are refused."""
 from __future__ import annotations
 
 import json
@@ -13,7 +14,7 @@ import pytest
 
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
 from sasmi.errors import SasmiError
-from sasmi.realism.calibration_study import leader, next_search, sampler_for, study_name
+from sasmi.realism.calibration_study import next_search, sampler_for, study_name
 from sasmi.scene.preset import load_preset
 
 GAIN = optuna.distributions.FloatDistribution(0.01, 3.0)
@@ -33,55 +34,60 @@ def studies_with(values: list[list[float]], seconds: list[float]) -> list:
     return studies
 
 
-def test_each_search_runs_its_share_of_the_first_half_then_the_lowest_alone():
-    cfg = CalibrateConfig(minutes=1.0, searches=2)  # 60 s: 15 s each to race, then 30 s for the leader
-    assert next_search(studies_with([[3.0], []], [2.0, 0.0]), cfg) == 1  # fewest trials first
+def test_each_search_runs_its_share_of_the_budget_the_one_furthest_behind_first():
+    cfg = CalibrateConfig(minutes=1.0, searches=2)  # 60 s: 30 s each
+    assert next_search(studies_with([[3.0], []], [2.0, 0.0]), cfg) == 1  # the least time first
     assert next_search(studies_with([[3.0], [2.0, 2.5]], [2.0, 4.0]), cfg) == 0
-    assert next_search(studies_with([[3.0] * 5, [2.0]], [15.0, 2.0]), cfg) == 1  # search 0 ran its share
-    for seconds in ([15.0, 15.0], [15.0, 44.0], [29.0, 30.0]):  # race over: the lower best continues
-        assert next_search(studies_with([[3.0, 1.5], [2.0, 2.5]], seconds), cfg) == 0
-        assert next_search(studies_with([[3.0, 2.1], [2.0, 2.5]], seconds), cfg) == 1
-    assert next_search(studies_with([[3.0], [2.0]], [16.0, 44.0]), cfg) is None  # 60 s spent
+    assert next_search(studies_with([[3.0] * 5, [2.0]], [30.0, 2.0]), cfg) == 1  # search 0 ran its share
+    assert next_search(studies_with([[1.0] * 5, [2.0]], [29.0, 30.0]), cfg) == 0  # its best does not matter
+    assert next_search(studies_with([[3.0], [2.0]], [30.0, 30.0]), cfg) is None  # 60 s spent
     one = CalibrateConfig(minutes=1.0, searches=1)
     assert next_search(studies_with([[3.0] * 9], [59.0]), one) == 0
     assert next_search(studies_with([[3.0] * 9], [60.0]), one) is None
 
 
-def test_with_a_trial_budget_each_search_races_a_quarter_of_the_trials_of_two():
-    cfg = CalibrateConfig(trials=10, searches=2)  # ceil(10 / 4) = 3 trials each to race
-    assert next_search(studies_with([[3.0] * 2, [2.0] * 3], [1.0, 1.0]), cfg) == 0
-    assert next_search(studies_with([[3.0] * 3, [2.0] * 3], [1.0, 1.0]), cfg) == 1  # the leader
-    assert next_search(studies_with([[1.0] * 3, [2.0] * 6], [1.0, 1.0]), cfg) == 0  # a lower best leads
-    assert next_search(studies_with([[3.0] * 3, [2.0] * 7], [1.0, 1.0]), cfg) is None
-    three = CalibrateConfig(trials=12, searches=3)  # 2 each
-    assert next_search(studies_with([[3.0] * 2, [2.0] * 2, [4.0]], [1.0, 1.0, 1.0]), three) == 2
-    assert leader(studies_with([[3.0], [], [2.5]], [1.0, 0.0, 1.0])) == 2  # a search with no trial told is last
+def test_with_a_trial_budget_each_search_asks_its_share_of_the_trials():
+    cfg = CalibrateConfig(trials=10, searches=2)  # 5 each
+    assert next_search(studies_with([[3.0] * 2, [2.0] * 3], [9.0, 1.0]), cfg) == 0  # the fewest trials first
+    assert next_search(studies_with([[3.0] * 5, [2.0] * 3], [1.0, 9.0]), cfg) == 1
+    assert next_search(studies_with([[3.0] * 5, [2.0] * 5], [1.0, 1.0]), cfg) is None
+    three = CalibrateConfig(trials=12, searches=3)  # 4 each
+    assert next_search(studies_with([[3.0] * 4, [2.0] * 3, [4.0] * 3], [1.0, 1.0, 1.0]), three) == 1
 
 
-def test_the_report_and_the_calibrated_preset_are_the_leaders(real_chips, tmp_path, monkeypatch):
-    """Three searches over the gain, scored by its distance from 0.4 alone (no render per trial): the one whose race
-    came closest continues, its trials fill the rest of the budget, and its trial is the calibrated preset."""
+def test_each_search_renders_its_own_scenes_and_the_one_told_least_is_calibrated(real_chips, tmp_path, monkeypatch):
+    """Three searches over the gain, scored by its distance from a gain their scenes ask for alone (no render per
+    trial): 0.4, 0.8 and 1.6 on the scenes of searches 0, 1 and 2, the last two scoring higher all along. The report's
+    two-sample test here tells brighter renders less often: search 2, whose gain is highest, is kept whatever its
+    objective, its trial is the calibrated preset and its knobs are judged on its own scenes."""
     import sasmi.realism.calibrate as calibrate_module
+    import sasmi.realism.calibration_objective as objective_module
 
-    def distance_from_04(raw, *args):
-        return {"objective": 0.01 + abs(load_gain(raw) - 0.4), "statistics": 0.0, "distribution": 0.0, "phi_ratio": 1.0,
-                "recall": 0.5, "passed": 0}
+    seeds = []
 
-    monkeypatch.setattr(calibrate_module, "trial_score", distance_from_04)
+    def distance_from_its_scenes_gain(raw, preset_path, real, cfg, *args):
+        seeds.append(cfg.seed)
+        search = cfg.seed // 1000  # the other draws (seeds 2-9) ask for search 0's gain
+        return {"objective": 0.01 + 0.5 * search + abs(load_gain(raw) - (0.4, 0.8, 1.6)[search]),
+                "statistics": 0.0, "distribution": 0.0, "phi_ratio": 1.0, "recall": 0.5, "passed": 0}
+
+    monkeypatch.setattr(calibrate_module, "trial_score", distance_from_its_scenes_gain)
+    monkeypatch.setattr(objective_module, "told_apart",
+                        lambda real, images, seed: {"auc": 1.0 - float(images.mean()), "auc_std": 0.0})
     cfg = CalibrateConfig(params=("post.gain",), trials=24, chips=8, size=32, final_chips=8, searches=3,
                           contenders=2, profile_trials=0)
     out = calibrate(real_chips / "targets", "muscle_paper", cfg, tmp_path / "run", progress=False)
+    assert seeds[:3] == [0, 1000, 2000] and set(seeds) == {0, 1000, 2000, *range(2, 10)}  # then the other draws
     storage = f"sqlite:///{out / 'study.db'}"
     studies = [optuna.load_study(study_name=study_name(i), storage=storage) for i in range(3)]
-    raced = [min(t.value for t in s.trials[:4]) for s in studies]  # ceil(24 / 6) = 4 trials each
-    chosen = raced.index(min(raced))
-    assert len({round(v, 6) for v in raced}) == 3  # three paths, not one asked thrice
-    assert sorted(len(s.trials) for s in studies) == [4, 4, 16] and len(studies[chosen].trials) == 16
+    assert [len(s.trials) for s in studies] == [8, 8, 8]
+    gains = [s.trials[s.user_attrs["calibrated_trial"]].params["post.gain"] for s in studies]
+    assert gains[0] < gains[1] < gains[2] and min(s.best_value for s in studies) == studies[0].best_value
+    assert load_gain(load_preset(out / "preset.toml").raw) == pytest.approx(gains[2], rel=1e-3)
+    assert set(seeds[24:]) - set(range(2, 10)) == {2000}  # the kept search's knobs judged on its own scenes
     report = (out / "report.md").read_text()
-    assert re.search(rf"search {chosen}, the lowest when the race ended, continued alone", report), report[:600]
-    calibrated = studies[chosen].trials[studies[chosen].user_attrs["calibrated_trial"]]
-    assert load_gain(load_preset(out / "preset.toml").raw) == pytest.approx(calibrated.params["post.gain"], rel=1e-3)
-    assert "calibrated_trial" not in studies[(chosen + 1) % 3].user_attrs
+    assert re.search(r"is kept: search 2\.", report) and "| 2 (kept) | 8 |" in report, report[:1500]
+    assert report.count("(kept)") == 1
 
 
 def load_gain(raw: dict) -> float:
@@ -113,7 +119,8 @@ def test_the_first_generation_lies_a_step_from_the_start():
     np.testing.assert_allclose(small, 0.3 * default, atol=0.005)
 
 
-def test_a_study_begun_before_the_flags_continues_as_one_search_at_optunas_step(real_chips, tmp_path, monkeypatch):
+def test_a_study_begun_before_the_flags_continues_as_one_search_at_optunas_step(real_chips, tmp_path, monkeypatch,
+                                                                                quick_two_sample):
     import sasmi.realism.calibrate as calibrate_module
 
     monkeypatch.setattr(calibrate_module, "trial_score", lambda raw, *args: {
@@ -123,9 +130,15 @@ def test_a_study_begun_before_the_flags_continues_as_one_search_at_optunas_step(
                           profile_trials=0)
     out = calibrate(real_chips / "targets", "muscle_paper", cfg, tmp_path / "run", progress=False)
     record = json.loads((out / "calibrate.json").read_text())
-    for key in ("step", "searches", "redraw_scenes"):
+    for key in ("step", "searches", "redraw_scenes", "search_scenes"):
         del record["identity"][key]
     (out / "calibrate.json").write_text(json.dumps(record))
+    raced = {**record, "identity": {**record["identity"], "searches": 2}}
+    (tmp_path / "raced").mkdir()
+    (tmp_path / "raced" / "calibrate.json").write_text(json.dumps(raced))
+    with pytest.raises(SasmiError, match="other settings \\(search_scenes\\)"):
+        calibrate(real_chips / "targets", "muscle_paper", CalibrateConfig(**{**cfg.__dict__, "searches": 2}),
+                  tmp_path / "raced", progress=False)
     for changed, named in (({"searches": 2}, "searches"), ({"step": 0.05}, "step"),
                            ({"redraw_scenes": True}, "redraw_scenes")):
         with pytest.raises(SasmiError, match=f"other settings \\({named}\\)"):
@@ -157,7 +170,7 @@ def firsts_asked(real_chips, out, monkeypatch, **flags) -> list[tuple[int, int, 
     return [(t.number, first, t.system_attrs.get("cma:generation")) for t, first in zip(trials, firsts)]
 
 
-def test_with_redraw_scenes_each_generation_renders_its_own_draw(real_chips, tmp_path, monkeypatch):
+def test_with_redraw_scenes_each_generation_renders_its_own_draw(real_chips, tmp_path, monkeypatch, quick_two_sample):
     """CMA-ES asks 6 a generation over two knobs: the start renders scenes 0-7, generation g scenes 8(g + 1), ...;
     without the flag every trial renders scenes 0-7."""
     redrawn = firsts_asked(real_chips, tmp_path / "redrawn", monkeypatch, redraw_scenes=True)
