@@ -82,6 +82,8 @@ def next_search(studies: list, cfg) -> int | None:
     searches runs for 1/N of it, the one furthest behind first."""
     seconds = [searched_seconds([s]) for s in studies]
     counts = [asked(s) for s in studies]
+    if cfg.trials is not None and sum(counts) >= cfg.trials:  # shares rounded up: the last may get one fewer
+        return None
     share = len(studies)
     running = [i for i in range(share) if seconds[i] < cfg.minutes * 60 / share
                and (cfg.trials is None or counts[i] < math.ceil(cfg.trials / share))]

@@ -51,6 +51,9 @@ def test_with_a_trial_budget_each_search_asks_its_share_of_the_trials():
     assert next_search(studies_with([[3.0] * 2, [2.0] * 3], [9.0, 1.0]), cfg) == 0  # the fewest trials first
     assert next_search(studies_with([[3.0] * 5, [2.0] * 3], [1.0, 9.0]), cfg) == 1
     assert next_search(studies_with([[3.0] * 5, [2.0] * 5], [1.0, 1.0]), cfg) is None
+    odd = CalibrateConfig(trials=5, searches=2)  # 3 and 2
+    assert next_search(studies_with([[3.0] * 3, [2.0]], [1.0, 1.0]), odd) == 1
+    assert next_search(studies_with([[3.0] * 3, [2.0] * 2], [1.0, 1.0]), odd) is None
     three = CalibrateConfig(trials=12, searches=3)  # 4 each
     assert next_search(studies_with([[3.0] * 4, [2.0] * 3, [4.0] * 3], [1.0, 1.0, 1.0]), three) == 1
 
