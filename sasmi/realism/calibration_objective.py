@@ -213,11 +213,8 @@ def told_apart(real: np.ndarray, images: np.ndarray, seed: int) -> dict:
     small CNN telling them apart (0.5: it cannot). Of calibrated presets, the one it tells less often from the chips
     calibrated to was told less often from held-out chips of the same sonar too (docs/calibrate.md)."""
     from sasmi.eval.config import TwoSampleConfig
+    from sasmi.eval.features import to_pixels
     from sasmi.eval.two_sample import resized, two_sample_auc
 
     cfg = TwoSampleConfig()
-
-    def small(x: np.ndarray) -> np.ndarray:
-        return resized(np.round(np.clip(x, 0, 1) * 255).astype(np.uint8), cfg.size)
-
-    return two_sample_auc(small(real), small(images), cfg, seed)
+    return two_sample_auc(resized(to_pixels(real), cfg.size), resized(to_pixels(images), cfg.size), cfg, seed)
