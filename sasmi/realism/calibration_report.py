@@ -274,13 +274,19 @@ def search_lines(studies: list, chosen: int, judgement: list[tuple[int, dict]]) 
             f"{lowest(s):.3g} | {number} | {score['two_sample']:.3f} ± {score['two_sample_std']:.3f} | "
             f"{score['phi_ratio']:.2f} | {score['passed']} |" for i, (s, (number, score)) in
             enumerate(zip(studies, judgement))]
+    kept = judgement[chosen][1]
+    close = [str(i) for i, (_, s) in enumerate(judgement) if i != chosen and s["two_sample"] - kept["two_sample"]
+             < max(s["two_sample_std"], kept["two_sample_std"])]
+    who = f"Search {close[0]} was" if len(close) == 1 else f"Searches {', '.join(close)} were"
+    near = [f"{who} told apart within the test's spread over folds of search {chosen}'s: a close choice, which "
+            "held-out chips may reverse.", ""] if close else []
     return [f"{len(studies)} searches from the start, each its own sampler path over its own draw of the scenes, "
             f"shared the search time. Each one's calibrated trial rendered the report's scenes, and the one a small "
             f"CNN (the two-sample test of `sasmi evaluate`, ROC AUC) told least from the real chips is kept: search "
             f"{chosen}. Of calibrated presets, the one that test tells less often from the chips calibrated to was "
             f"told less often from held-out chips too (docs/calibrate.md). What follows is search {chosen}'s.", "",
             "| search | trials | minutes | best objective | calibrated trial | two-sample | φ-FID ratio | "
-            "statistics within tolerance |", "|---|---|---|---|---|---|---|---|", *rows, ""]
+            "statistics within tolerance |", "|---|---|---|---|---|---|---|---|", *rows, "", *near]
 
 
 def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, studies: list, chosen: int,

@@ -14,6 +14,7 @@ import pytest
 
 from sasmi.realism.calibrate import CalibrateConfig, calibrate, render_chips
 from sasmi.errors import SasmiError
+from sasmi.realism.calibration_report import search_lines
 from sasmi.realism.calibration_study import next_search, sampler_for, study_name
 from sasmi.scene.preset import load_preset
 
@@ -56,6 +57,21 @@ def test_with_a_trial_budget_each_search_asks_its_share_of_the_trials():
     assert next_search(studies_with([[3.0] * 3, [2.0] * 2], [1.0, 1.0]), odd) is None
     three = CalibrateConfig(trials=12, searches=3)  # 4 each
     assert next_search(studies_with([[3.0] * 4, [2.0] * 3, [4.0] * 3], [1.0, 1.0, 1.0]), three) == 1
+
+
+def test_the_report_says_when_another_search_was_told_apart_within_the_tests_spread():
+    studies = studies_with([[1.4], [1.6], [1.5]], [60.0, 60.0, 60.0])
+
+    def judged(*told: tuple[float, float]) -> list[tuple[int, dict]]:
+        return [(0, {"two_sample": auc, "two_sample_std": std, "phi_ratio": 1.1, "passed": 12}) for auc, std in told]
+
+    apart = "\n".join(search_lines(studies, 0, judged((0.80, 0.03), (0.90, 0.04), (0.86, 0.05))))
+    assert "| 0 (kept) | 1 | 1.0 | 1.4 | 0 | 0.800 ± 0.030 |" in apart
+    assert "close choice" not in apart  # 0.10 and 0.06 apart, beyond either's spread
+    close = "\n".join(search_lines(studies, 0, judged((0.80, 0.03), (0.84, 0.05), (0.83, 0.02))))
+    assert "Searches 1, 2 were told apart within the test's spread over folds of search 0's" in close
+    one = "\n".join(search_lines(studies, 1, judged((0.84, 0.02), (0.82, 0.03), (0.95, 0.02))))
+    assert "Search 0 was told apart within the test's spread over folds of search 1's" in one
 
 
 def test_each_search_renders_its_own_scenes_and_the_one_told_least_is_calibrated(real_chips, tmp_path, monkeypatch):
