@@ -275,7 +275,7 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             final = replace(cfg, seed=cfg.seed + 1)
             judged = tqdm(unit="trial", desc="choose and judge the calibrated trial", disable=not progress or None)
 
-            def objectives(settings: list[dict], seed: int = cfg.seed) -> list[float]:  # on the scenes of `seed`
+            def objectives(settings: list[dict], seed: int) -> list[float]:  # on the scenes of `seed`
                 scores = run([apply(preset.raw, values) for values in settings], seed)
                 judged.update(len(settings))
                 return [s["objective"] for s in scores]
