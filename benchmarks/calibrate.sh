@@ -34,27 +34,7 @@ MINUTES=${2:-30}
 SONAR=${3:-sassed}
 SASMI=.venv/bin/sasmi
 DATA=../shared/data/sonar-chips
-FLOOR_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
-seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.ripple_wavelength,\
-seafloor.ripple_direction,seafloor.ripple_sinuosity,seafloor.ripple_sharpness,seafloor.mosaic_contrast,\
-seafloor.mosaic_share,seafloor.mosaic_size,seafloor.rocks,seafloor.rock_radius,post.gain,post.tvg_strength,\
-post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,post.noise_std,post.gain_swing,\
-post.speckle_wander,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
-# seafloor_mixed's three kinds of seabed (sand waves, rippled sand, two sediments): the geometry, gray levels and
-# speckle as FLOOR_KNOBS, the floor's level and relief alike in every kind, each kind's own features and the two
-# later kinds' weights against the first's
-MIXED_KNOBS=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
-seafloor.rms_height,seafloor.correlation_length,seafloor.rock_radius,seafloor[0].ripple_amplitude,\
-seafloor[0].ripple_wavelength,seafloor[0].ripple_direction,seafloor[0].ripple_sinuosity,\
-seafloor[0].ripple_sharpness,seafloor[1].weight,seafloor[1].ripple_amplitude,seafloor[1].ripple_wavelength,\
-seafloor[1].rocks,seafloor[2].weight,seafloor[2].mosaic_contrast,seafloor[2].mosaic_share,seafloor[2].mosaic_size,\
-post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,\
-post.noise_std,post.gain_swing,post.speckle_wander,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
-# the default knobs of commit 80abb38 (ripples among them, no track offset) but post.gain_swing, in their order
-NO_SWING=sonar.altitude,sonar.near_range,sonar.chip_size,sonar.track_length,sonar.cone_angle,seafloor.albedo,\
-seafloor.rms_height,seafloor.correlation_length,seafloor.ripple_amplitude,seafloor.rocks,seafloor.rock_radius,\
-post.gain,post.tvg_strength,post.noise_floor,post.speckle_looks,post.speckle_cell_range,post.speckle_cell_track,\
-post.noise_std,targets.size,targets.burial,post.gain.spread,seafloor.albedo.spread,sonar.altitude.spread
+. benchmarks/knob_lists.sh  # FLOOR_KNOBS, MIXED_KNOBS, NO_SWING
 
 [ -d "$RUNS/split" ] || $SASMI split $DATA --seed 0 --out "$RUNS/split"
 $SASMI calibrate --real "$RUNS/split/train/targets" --preset muscle_paper --minutes "$MINUTES" \
@@ -126,22 +106,7 @@ for hide in floor target none; do
         "$RUNS/calibrate-muscle-length/placed-renders"
 done
 
-# one sonar's floor chips, with their MANIFEST rows, as a chip folder of their own (links, no copies)
-.venv/bin/python - "$DATA" "$RUNS/$SONAR" "$SONAR" <<'PY'
-import csv, os, sys
-data, out, sonar = sys.argv[1:]
-rows = [r for r in csv.DictReader(open(f"{data}/MANIFEST.csv")) if r["scene_group"].startswith(sonar)]
-os.makedirs(f"{out}/seafloor", exist_ok=True)
-for r in rows:
-    link = f"{out}/{r['file']}"
-    if not os.path.lexists(link):
-        os.symlink(os.path.abspath(f"{data}/{r['file']}"), link)
-with open(f"{out}/MANIFEST.csv", "w", newline="") as f:
-    writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-print(f"{len(rows)} {sonar} chips in {out}")
-PY
+.venv/bin/python benchmarks/sonar_floors.py "$DATA" "$SONAR" "$RUNS/$SONAR"
 [ -d "$RUNS/$SONAR-split" ] || $SASMI split "$RUNS/$SONAR" --seed 0 --out "$RUNS/$SONAR-split"
 TRAIN=$(ls "$RUNS/$SONAR-split/train/seafloor" | wc -l)  # --chips leaves 8 real chips out of each trial's draw
 $SASMI calibrate --real "$RUNS/$SONAR-split/train/seafloor" --preset seafloor_only --params "$FLOOR_KNOBS" \

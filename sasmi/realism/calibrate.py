@@ -299,7 +299,8 @@ def calibrate(real_folder: str | Path, start: str | Path, cfg: CalibrateConfig, 
             best_raw, shown["calibrated"], refinement = refine(best_raw, preset, real, encoder, cfg, final,
                                                                 shown["calibrated"], progress)
         judgement = [(trial.number, score) for (_, trial), (_, score) in zip(each, each_shown)]
-        write_report(out, record, cfg, preset, best_raw, real, studies, search, judgement, shown, pins, together,
+        raws = [best_raw if i == search else raw for i, (raw, _) in enumerate(each)]
+        write_report(out, record, cfg, preset, raws, real, studies, search, judgement, shown, pins, together,
                      refinement)
     finally:
         lock.release()

@@ -111,11 +111,11 @@ def refinement_lines(refinement: dict | None) -> list[str]:
 
 
 def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str, float],
-                refinement: dict | None = None) -> str:
+                refinement: dict | None = None, search: str = "") -> str:
     from sasmi.realism.fit_scene import preset_toml
 
     before = start_values(start.raw, cfg.params)
-    header = [f"# Calibrated by `sasmi calibrate` from {Path(record['start']).name} to the chips of "
+    header = [f"# Calibrated by `sasmi calibrate`{search} from {Path(record['start']).name} to the chips of "
               f"{record['real']}", f"# ({len(cfg.params)} knobs; docs/calibrate.md). Start -> calibrated:"]
     header += [f"#   {n}: {before[n]:.4g} -> {best_values[n]:.4g}" for n in cfg.params]
     if refinement and refinement["kept"]:
@@ -280,18 +280,21 @@ def search_lines(studies: list, chosen: int, judgement: list[tuple[int, dict]]) 
     who = f"Search {close[0]} was" if len(close) == 1 else f"Searches {', '.join(close)} were"
     near = [f"{who} told apart within the test's spread over folds of search {chosen}'s: a close choice, which "
             "held-out chips may reverse.", ""] if close else []
+    others = ", ".join(f"`search-{i}.toml`" for i in range(len(studies)) if i != chosen)
     return [f"{len(studies)} searches from the start, each its own sampler path over its own draw of the scenes, "
             f"shared the search time. Each one's calibrated trial rendered the report's scenes, and the one a small "
             f"CNN (the two-sample test of `sasmi evaluate`, ROC AUC) told least from the real chips is kept: search "
             f"{chosen}. Of calibrated presets, the one that test tells less often from the chips calibrated to was "
-            f"told less often from held-out chips too (docs/calibrate.md). What follows is search {chosen}'s.", "",
+            f"told less often from held-out chips too (docs/calibrate.md). What follows is search {chosen}'s; the "
+            f"others' calibrated presets are {others}, to render against held-out chips of your own.", "",
             "| search | trials | minutes | best objective | calibrated trial | two-sample | φ-FID ratio | "
             "statistics within tolerance |", "|---|---|---|---|---|---|---|---|", *rows, "", *near]
 
 
-def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, studies: list, chosen: int,
+def write_report(out: Path, record: dict, cfg, start, raws: list[dict], real, studies: list, chosen: int,
                  judgement: list[tuple[int, dict]], shown: dict, pins: dict[str, dict], together: dict[str, dict],
                  refinement: dict | None = None) -> None:
+    """`raws`: each search's calibrated preset, the kept one (`chosen`) refined where `refinement` was kept."""
     import json
 
     study = studies[chosen]
@@ -299,7 +302,11 @@ def write_report(out: Path, record: dict, cfg, start, best_raw: dict, real, stud
     draws, contenders = study.user_attrs["contenders"]["draws"], study.user_attrs["contenders"]["scores"]
     write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
     write_text(out / "together.json", json.dumps(together, indent=2, ensure_ascii=False) + "\n")
-    write_text(out / "preset.toml", preset_text(record, cfg, start, best_raw, best.params, refinement))
+    write_text(out / "preset.toml", preset_text(record, cfg, start, raws[chosen], best.params, refinement))
+    for i, (raw, (number, _)) in enumerate(zip(raws, judgement)):
+        if i != chosen:  # where the choice was close, held-out chips may prefer another search's
+            write_text(out / f"search-{i}.toml", preset_text(record, cfg, start, raw, studies[i].trials[number].params,
+                                                             search=f" (search {i}, not kept: report.md)"))
     objective_figure(studies, chosen, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
     trials = [(t.value, t.params) for t in study.trials if t.value is not None]

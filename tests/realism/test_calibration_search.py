@@ -74,11 +74,13 @@ def test_the_report_says_when_another_search_was_told_apart_within_the_tests_spr
     assert "Search 0 was told apart within the test's spread over folds of search 1's" in one
 
 
-def test_each_search_renders_its_own_scenes_and_the_one_told_least_is_calibrated(real_chips, tmp_path, monkeypatch):
+def test_each_search_renders_its_own_scenes_the_one_told_least_is_kept_the_others_written_beside(real_chips, tmp_path,
+                                                                                                  monkeypatch):
     """Three searches over the gain, scored by its distance from a gain their scenes ask for alone (no render per
     trial): 0.4, 0.8 and 1.6 on the scenes of searches 0, 1 and 2, the last two scoring higher all along. The report's
     two-sample test here tells brighter renders less often: search 2, whose gain is highest, is kept whatever its
-    objective, its trial is the calibrated preset and its knobs are judged on its own scenes."""
+    objective, its trial is the calibrated preset and its knobs are judged on its own scenes; the other two searches'
+    calibrated presets are written beside it."""
     import sasmi.realism.calibrate as calibrate_module
     import sasmi.realism.calibration_objective as objective_module
 
@@ -103,10 +105,13 @@ def test_each_search_renders_its_own_scenes_and_the_one_told_least_is_calibrated
     gains = [s.trials[s.user_attrs["calibrated_trial"]].params["post.gain"] for s in studies]
     assert gains[0] < gains[1] < gains[2] and min(s.best_value for s in studies) == studies[0].best_value
     assert load_gain(load_preset(out / "preset.toml").raw) == pytest.approx(gains[2], rel=1e-3)
+    for i in (0, 1):  # the searches not kept: their calibrated presets beside the kept one, loadable
+        assert load_gain(load_preset(out / f"search-{i}.toml").raw) == pytest.approx(gains[i], rel=1e-3)
+    assert not (out / "search-2.toml").exists()
     assert set(seeds[24:]) - set(range(2, 10)) == {2000}  # the kept search's knobs judged on its own scenes
     report = (out / "report.md").read_text()
     assert re.search(r"is kept: search 2\.", report) and "| 2 (kept) | 8 |" in report, report[:1500]
-    assert report.count("(kept)") == 1
+    assert report.count("(kept)") == 1 and "`search-0.toml`, `search-1.toml`" in report
 
 
 def load_gain(raw: dict) -> float:
