@@ -110,18 +110,18 @@ def refinement_lines(refinement: dict | None) -> list[str]:
             f"{'kept (the calibrated column above)' if refinement['kept'] else 'not kept'}.", ""]
 
 
-def preset_text(record: dict, cfg, start, best_raw: dict, best_values: dict[str, float],
-                refinement: dict | None = None, search: str = "") -> str:
+def preset_text(record: dict, cfg, start, raw: dict, values: dict[str, float], refinement: dict | None = None,
+                search: str = "") -> str:
     from sasmi.realism.fit_scene import preset_toml
 
     before = start_values(start.raw, cfg.params)
     header = [f"# Calibrated by `sasmi calibrate`{search} from {Path(record['start']).name} to the chips of "
               f"{record['real']}", f"# ({len(cfg.params)} knobs; docs/calibrate.md). Start -> calibrated:"]
-    header += [f"#   {n}: {before[n]:.4g} -> {best_values[n]:.4g}" for n in cfg.params]
+    header += [f"#   {n}: {before[n]:.4g} -> {values[n]:.4g}" for n in cfg.params]
     if refinement and refinement["kept"]:
         header += ["# then refined by gradients (sasmi fit-scene): "
                    + ", ".join(f"{p} x {s:.3g}" for p, s in refinement["scales"].items())]
-    return "\n".join(header) + "\n" + preset_toml(best_raw)
+    return "\n".join(header) + "\n" + preset_toml(raw)
 
 
 def statistics_table(real, shown: dict) -> list[str]:
