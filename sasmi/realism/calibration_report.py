@@ -154,10 +154,8 @@ def distribution_table(real, shown: dict) -> list[str]:
              "| statistic | real median | start | calibrated |", "|---|---|---|---|"]
     for name, values in real.per_chip.items():
         label = STATISTICS[name][0] if name in STATISTICS else f"{name} ({SIGNATURE[name]})"
-        cells = []
-        for n in ("start", "calibrated"):
-            auc = shown[n][1]["aucs"].get(name)
-            cells.append("—" if auc is None else f"{auc:.2f}" + ("" if abs(auc - 0.5) <= tolerance else " **far**"))
+        aucs = [shown[n][1]["aucs"].get(name) for n in ("start", "calibrated")]
+        cells = ["—" if a is None else f"{a:.2f}" + ("" if abs(a - 0.5) <= tolerance else " **far**") for a in aucs]
         median = float(np.nanmedian(values)) if np.isfinite(values).any() else math.nan
         lines.append(f"| {label} | {_number(median)} | {' | '.join(cells)} |")
     return lines
@@ -266,12 +264,15 @@ def sheet_figure(real, shown: dict, path: Path) -> None:
 
 
 def search_lines(studies: list, chosen: int, judgement: list[tuple[int, dict]]) -> list[str]:
-    """The searches side by side: each one's trials, best and calibrated trial, that trial's report renders judged,
-    and which was kept."""
+    """The searches side by side: trials, best and calibrated trial, its report renders judged, which was kept."""
     if len(studies) == 1:
         return []
+    # a calibrated trial's objective on other draws of its search's scenes: how much of its score was its own draw's
+    elsewhere = [next(c[2] for c in s.user_attrs["contenders"]["scores"] if c[0] == number)
+                 for s, (number, _) in zip(studies, judgement)]
     rows = [f"| {i}{' (kept)' if i == chosen else ''} | {len(s.trials)} | {searched_seconds([s]) / 60:.1f} | "
-            f"{lowest(s):.3g} | {number} | {score['two_sample']:.3f} ± {score['two_sample_std']:.3f} | "
+            f"{lowest(s):.3g} | {number} | {elsewhere[i]:.3g} | {score['two_sample']:.3f} ± "
+            f"{score['two_sample_std']:.3f} | "
             f"{score['phi_ratio']:.2f} | {score['passed']} |" for i, (s, (number, score)) in
             enumerate(zip(studies, judgement))]
     kept = judgement[chosen][1]
@@ -287,8 +288,8 @@ def search_lines(studies: list, chosen: int, judgement: list[tuple[int, dict]]) 
             f"{chosen}. Of calibrated presets, the one that test tells less often from the chips calibrated to was "
             f"told less often from held-out chips too (docs/calibrate.md). What follows is search {chosen}'s; the "
             f"others' calibrated presets are {others}, to render against held-out chips of your own.", "",
-            "| search | trials | minutes | best objective | calibrated trial | two-sample | φ-FID ratio | "
-            "statistics within tolerance |", "|---|---|---|---|---|---|---|---|", *rows, "", *near]
+            "| search | trials | minutes | best objective | calibrated trial | on other draws | two-sample | "
+            "φ-FID ratio | statistics within tolerance |", "|---|---|---|---|---|---|---|---|---|", *rows, "", *near]
 
 
 def write_report(out: Path, record: dict, cfg, start, raws: list[dict], real, studies: list, chosen: int,

@@ -61,12 +61,15 @@ def test_with_a_trial_budget_each_search_asks_its_share_of_the_trials():
 
 def test_the_report_says_when_another_search_was_told_apart_within_the_tests_spread():
     studies = studies_with([[1.4], [1.6], [1.5]], [60.0, 60.0, 60.0])
+    for study, elsewhere in zip(studies, (1.7, 3.6, 1.9)):  # trial 0 calibrated: its score on other draws
+        study.set_user_attr("contenders", {"draws": 4, "scores": [[0, study.best_value, elsewhere]]})
 
     def judged(*told: tuple[float, float]) -> list[tuple[int, dict]]:
         return [(0, {"two_sample": auc, "two_sample_std": std, "phi_ratio": 1.1, "passed": 12}) for auc, std in told]
 
     apart = "\n".join(search_lines(studies, 0, judged((0.80, 0.03), (0.90, 0.04), (0.86, 0.05))))
-    assert "| 0 (kept) | 1 | 1.0 | 1.4 | 0 | 0.800 ± 0.030 |" in apart
+    assert "| 0 (kept) | 1 | 1.0 | 1.4 | 0 | 1.7 | 0.800 ± 0.030 |" in apart
+    assert "| 1 | 1 | 1.0 | 1.6 | 0 | 3.6 | 0.900 ± 0.040 |" in apart
     assert "close choice" not in apart  # 0.10 and 0.06 apart, beyond either's spread
     close = "\n".join(search_lines(studies, 0, judged((0.80, 0.03), (0.84, 0.05), (0.83, 0.02))))
     assert "Searches 1, 2 were told apart within the test's spread over folds of search 0's" in close
