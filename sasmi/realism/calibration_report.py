@@ -272,9 +272,8 @@ def search_lines(studies: list, chosen: int, judgement: list[tuple[int, dict]]) 
                  for s, (number, _) in zip(studies, judgement)]
     rows = [f"| {i}{' (kept)' if i == chosen else ''} | {len(s.trials)} | {searched_seconds([s]) / 60:.1f} | "
             f"{lowest(s):.3g} | {number} | {elsewhere[i]:.3g} | {score['two_sample']:.3f} ± "
-            f"{score['two_sample_std']:.3f} | "
-            f"{score['phi_ratio']:.2f} | {score['passed']} |" for i, (s, (number, score)) in
-            enumerate(zip(studies, judgement))]
+            f"{score['two_sample_std']:.3f} | {score['phi_ratio']:.2f} | {score['passed']} |"
+            for i, (s, (number, score)) in enumerate(zip(studies, judgement))]
     kept = judgement[chosen][1]
     close = [str(i) for i, (_, s) in enumerate(judgement) if i != chosen and s["two_sample"] - kept["two_sample"]
              < max(s["two_sample_std"], kept["two_sample_std"])]
