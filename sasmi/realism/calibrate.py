@@ -67,7 +67,8 @@ class CalibrateConfig:
     # fell faster but fitted their own scenes more than other draws: no better on held-out chips (docs/calibrate.md)
     step: float | None = None
     # searches sharing the time, each its own sampler path over its own draw of the scenes; the one whose report
-    # renders a classifier tells least from the real chips is calibrated (1: one search all along)
+    # renders a classifier tells least from the real chips is calibrated, the others written beside it. 1: over two
+    # seeds, two searches of one search's time each were no better on held-out chips (docs/calibrate.md)
     searches: int = 1
     # each CMA-ES generation renders its own draw of the scenes (all its trials the same one), so that no search fits
     # one draw. Off: two redrawn searches ended closer together on held-out chips, but no better (docs/calibrate.md)
