@@ -3,9 +3,9 @@
 With --searches N, N searches share the search time, each its own sampler path over its own draw of the scenes:
 single searches of one command can end where a classifier tells their chips from real ones very differently, and the
 two-sample test on the chips calibrated to ranks them mostly as held-out chips do (calibrate.py keeps the one it tells
-least; docs/calibrate.md). A rerun asks what an unbroken run asks: each trial's sampler is seeded by the seed, the search and
-the trial's number (CMA-ES keeps its state in the study, not in the sampler), a search's trials depend on no other
-search, and the trials a killed run had asked are scored as they were asked.
+least; docs/calibrate.md). A rerun asks what an unbroken run asks: each trial's sampler is seeded by the seed, the
+search and the trial's number (CMA-ES keeps its state in the study, not in the sampler), a search's trials depend on
+no other search, and the trials a killed run had asked are scored as they were asked.
 """
 from __future__ import annotations
 
