@@ -302,11 +302,12 @@ def write_report(out: Path, record: dict, cfg, start, raws: list[dict], real, st
     draws, contenders = study.user_attrs["contenders"]["draws"], study.user_attrs["contenders"]["scores"]
     write_text(out / "sensitivity.json", json.dumps(pins, indent=2) + "\n")
     write_text(out / "together.json", json.dumps(together, indent=2, ensure_ascii=False) + "\n")
-    write_text(out / "preset.toml", preset_text(record, cfg, start, raws[chosen], best.params, refinement))
+    # the kept preset, and each other search's beside it: where the choice was close, held-out chips may prefer one
     for i, (raw, (number, _)) in enumerate(zip(raws, judgement)):
-        if i != chosen:  # where the choice was close, held-out chips may prefer another search's
-            write_text(out / f"search-{i}.toml", preset_text(record, cfg, start, raw, studies[i].trials[number].params,
-                                                             search=f" (search {i}, not kept: report.md)"))
+        kept = i == chosen
+        write_text(out / ("preset.toml" if kept else f"search-{i}.toml"),
+                   preset_text(record, cfg, start, raw, studies[i].trials[number].params, refinement if kept else None,
+                               "" if kept else f" (search {i}, not kept: report.md)"))
     objective_figure(studies, chosen, out / "objective.png")
     sheet_figure(real, shown, out / "sheet.png")
     trials = [(t.value, t.params) for t in study.trials if t.value is not None]
